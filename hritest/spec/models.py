@@ -1,0 +1,246 @@
+"""The spec language as pydantic models: structure and per-field checks.
+
+Checks that need the whole spec (names that refer to other names) live in
+:mod:`hritest.spec.references`, so that every message can point at the exact field.
+Defaults are the paper's settings (``../shared/reference/dsas-reference-code.md`` section 5).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, PrivateAttr, StringConstraints, field_validator
+
+from hritest.spec import expr
+
+Name = Annotated[
+    str,
+    StringConstraints(pattern=r"^[A-Za-z][A-Za-z0-9_]*$"),
+    Field(description="letters, digits and '_', starting with a letter"),
+]
+
+
+def _check_interval(value: tuple[float, float]) -> tuple[float, float]:
+    lo, hi = value
+    if not lo < hi:
+        raise ValueError(f"the lower end must be below the upper end: got [{lo}, {hi}]; write [low, high]")
+    return value
+
+
+Interval = Annotated[tuple[float, float], AfterValidator(_check_interval)]
+Vec2 = tuple[float, float]
+Vec3 = tuple[float, float, float]
+PositiveFloat = Annotated[float, Field(gt=0)]
+PositiveInt = Annotated[int, Field(gt=0)]
+
+
+def _numeric(text: str) -> str:
+    expr.parse(text)
+    return text
+
+
+def _condition(text: str) -> str:
+    expr.parse(text, condition=True)
+    return text
+
+
+NumericExpr = Annotated[str, AfterValidator(_numeric)]
+ConditionExpr = Annotated[str, AfterValidator(_condition)]
+
+
+class Strict(BaseModel):
+    """Base of every spec model: unknown keys are errors, values are immutable."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class TaskSpec(Strict):
+    """The interaction: a task plugin, its time limit and tick."""
+
+    name: str = Field(description="registered task name (shared_control, collaboration) or module:Class")
+    time_limit: PositiveFloat = Field(description="seconds of simulated time before the episode stops")
+    dt: PositiveFloat = Field(0.025, description="simulation tick in seconds (40 Hz in the paper)")
+    params: dict[str, Any] = Field(default_factory=dict)
+
+
+class BoxSpec(Strict):
+    center: Vec3
+    half_size: Vec3
+
+    @field_validator("half_size")
+    @classmethod
+    def _positive(cls, value: Vec3) -> Vec3:
+        if min(value) <= 0:
+            raise ValueError(f"every half size must be positive, got {list(value)}")
+        return value
+
+
+class RegionSpec(Strict):
+    """A rectangle on the table in which object centres may be placed."""
+
+    name: Name
+    x: Interval
+    y: Interval
+
+
+class WorkspaceSpec(Strict):
+    table: BoxSpec
+    regions: list[RegionSpec] = Field(default_factory=list)
+
+
+class ObjectSpec(Strict):
+    """A goal object: a box, at a nominal position that parameters may move in x and y."""
+
+    name: Name
+    half_size: Vec3
+    position: Vec3
+
+    @field_validator("half_size")
+    @classmethod
+    def _positive(cls, value: Vec3) -> Vec3:
+        if min(value) <= 0:
+            raise ValueError(f"every half size must be positive, got {list(value)}")
+        return value
+
+
+class ParameterSpec(Strict):
+    """Binds ``size`` components of the scenario vector theta to one target.
+
+    ``bind`` is ``<object>.x``, ``<object>.y``, ``human.<param>``, ``robot.<param>`` or
+    ``task.<param>``; a group (``size > 1``) is passed to its target as an array.
+    """
+
+    name: Name
+    bind: str = Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*\.[A-Za-z][A-Za-z0-9_]*$")
+    bounds: Interval
+    size: PositiveInt = 1
+    description: str = ""
+
+
+class InsideConstraint(Strict):
+    """Each object's centre lies in at least one of the regions."""
+
+    type: Literal["inside"]
+    objects: list[str] = Field(min_length=1)
+    regions: list[str] = Field(min_length=1)
+
+
+class NoOverlapConstraint(Strict):
+    """No two of the objects' axis-aligned footprints overlap."""
+
+    type: Literal["no_overlap"]
+    objects: list[str] = Field(min_length=2)
+
+
+class MinSeparationConstraint(Strict):
+    """Every pair of the objects' centres is at least ``distance`` apart."""
+
+    type: Literal["min_separation"]
+    objects: list[str] = Field(min_length=2)
+    distance: PositiveFloat
+
+
+class BoundsConstraint(Strict):
+    """Theta stays within the parameters' bounds (repaired by clipping).
+
+    ``groups`` lists parameter names whose out-of-bound excesses are summed before squaring,
+    the teleoperation reference's repair cost; each unlisted parameter is its own group.
+    """
+
+    type: Literal["bounds"]
+    groups: list[list[str]] = Field(default_factory=list)
+
+
+Constraint = Annotated[
+    InsideConstraint | NoOverlapConstraint | MinSeparationConstraint | BoundsConstraint,
+    Field(discriminator="type"),
+]
+
+
+class PolicySpec(Strict):
+    """A robot or human policy: a registered name, ``module:Class`` or ``path/file.py:Class``."""
+
+    policy: str
+    params: dict[str, Any] = Field(default_factory=dict)
+
+
+class ObjectiveSpec(Strict):
+    """What the search maximises (higher = worse for the robot), and how repairs are penalised."""
+
+    expr: NumericExpr
+    range: Interval
+    repair_weight: float = Field(1.0, ge=0, description="search sees objective - weight * repair cost")
+
+
+class MeasureSpec(Strict):
+    """One axis of the archive: the failures found are spread along it."""
+
+    name: Name
+    expr: NumericExpr
+    range: Interval
+    cells: PositiveInt
+
+
+class EmitterSettings(Strict):
+    """CMA-ES emitters of CMA-MAE, SAS (CMA-MAE inner loop) and DSAS (CMA-MAEGA inner loop)."""
+
+    emitters: PositiveInt = 8
+    batch_size: PositiveInt = 37
+    sigma0: PositiveFloat = 0.01
+    x0: list[float] | None = Field(None, description="default: the centre of the parameter bounds")
+    learning_rate: float = Field(0.1, gt=0, le=1, description="archive learning rate alpha")
+    threshold_min: float = 0.0
+    gradient_lr: PositiveFloat = Field(1.0, description="DSAS gradient-ascent step")
+
+
+class MapElitesSettings(Strict):
+    batch_size: PositiveInt = 20
+    sigma: PositiveFloat | list[PositiveFloat] = 0.01
+
+
+class RandomSettings(Strict):
+    batch_size: PositiveInt = 100
+
+
+class SurrogateSettings(Strict):
+    """Outer and inner loop of SAS / DSAS (paper Algorithm 1, appendix "Surrogate Model Details")."""
+
+    initial_evaluations: PositiveInt = 100
+    inner_iterations: PositiveInt = 10_000
+    downsample_cells: list[PositiveInt] | None = Field(
+        None, description="cells per measure of the selection archive; one random elite per block is evaluated"
+    )
+    epochs: PositiveInt = 100
+    batch_size: PositiveInt = 64
+    learning_rate: PositiveFloat = 1e-4
+
+
+class SearchSpec(Strict):
+    algorithm: Literal["random", "map_elites", "cma_mae", "sas", "dsas"] = "dsas"
+    budget: PositiveInt = 10_000
+    seed: int = 0
+    emitter: EmitterSettings = Field(default_factory=EmitterSettings)
+    map_elites: MapElitesSettings = Field(default_factory=MapElitesSettings)
+    random: RandomSettings = Field(default_factory=RandomSettings)
+    surrogate: SurrogateSettings = Field(default_factory=SurrogateSettings)
+
+
+class Spec(Strict):
+    """A whole hritest domain: what varies, what is simulated, what counts as a failure."""
+
+    name: Name
+    description: str = ""
+    task: TaskSpec
+    workspace: WorkspaceSpec
+    objects: list[ObjectSpec] = Field(min_length=1)
+    parameters: list[ParameterSpec] = Field(min_length=1)
+    constraints: list[Constraint] = Field(default_factory=list)
+    robot: PolicySpec
+    human: PolicySpec
+    objective: ObjectiveSpec
+    measures: list[MeasureSpec] = Field(min_length=1)
+    failure: ConditionExpr
+    search: SearchSpec = Field(default_factory=SearchSpec)
+
+    # Where each value stands in the file (a hritest.spec.source.SourceMap), set by load_spec.
+    _source: Any = PrivateAttr(default=None)

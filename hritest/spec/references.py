@@ -1,0 +1,127 @@
+"""Checks that need the whole spec: names that refer to other names, sizes that must agree.
+
+Each check returns issues with the exact field path, so the message can point at the line.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Iterator
+
+from hritest.spec import expr
+from hritest.spec.models import BoundsConstraint, Spec
+
+AGENT_TARGETS = ("human", "robot", "task")
+OBJECT_ATTRIBUTES = ("x", "y")
+
+Found = Iterator[tuple[tuple[str | int, ...], str]]
+
+
+def check_references(spec: Spec, *, metrics: Collection[str] | None = None) -> list[tuple[tuple, str]]:
+    """Every cross-reference problem in ``spec`` as ``(path, message)`` pairs.
+
+    Args:
+        metrics: the metric names the task provides; ``None`` skips the expression-name check
+            (the task plugin is not loaded yet).
+    """
+    found = [*_duplicates(spec), *_bindings(spec), *_constraints(spec), *_search(spec)]
+    if metrics is not None:
+        found += list(_expression_names(spec, set(metrics)))
+    return found
+
+
+def _duplicates(spec: Spec) -> Found:
+    groups = {
+        "regions": [r.name for r in spec.workspace.regions],
+        "objects": [o.name for o in spec.objects],
+    }
+    for field, names in groups.items():
+        seen: set[str] = set()
+        for i, name in enumerate(names):
+            if name in seen:
+                path = ("workspace", "regions", i, "name") if field == "regions" else (field, i, "name")
+                yield path, f"duplicate name {name!r}: every entry of {field} needs its own name"
+            seen.add(name)
+    # Parameters and measures share one namespace: both may appear in expressions.
+    seen = {"objective"}
+    for field, items in (("parameters", spec.parameters), ("measures", spec.measures)):
+        for i, item in enumerate(items):
+            if item.name in seen:
+                yield (field, i, "name"), (
+                    f"duplicate name {item.name!r}: parameter and measure names must be unique "
+                    "and may not be 'objective'"
+                )
+            seen.add(item.name)
+
+
+def _bindings(spec: Spec) -> Found:
+    objects = {o.name for o in spec.objects}
+    bound: dict[str, int] = {}
+    for i, param in enumerate(spec.parameters):
+        head, attribute = param.bind.split(".")
+        path = ("parameters", i, "bind")
+        if head in objects:
+            if attribute not in OBJECT_ATTRIBUTES:
+                yield path, f"an object parameter binds '{head}.x' or '{head}.y', not {param.bind!r}"
+            elif param.size != 1:
+                yield ("parameters", i, "size"), f"{param.bind!r} is one number; remove 'size' or set it to 1"
+        elif head not in AGENT_TARGETS:
+            known = ", ".join(sorted(objects) + list(AGENT_TARGETS))
+            yield path, f"unknown target {head!r} in {param.bind!r}; bind to one of: {known}"
+        if param.bind in bound:
+            yield path, f"{param.bind!r} is already bound by parameters[{bound[param.bind]}]"
+        bound.setdefault(param.bind, i)
+
+
+def _constraints(spec: Spec) -> Found:
+    objects = {o.name for o in spec.objects}
+    regions = {r.name for r in spec.workspace.regions}
+    parameters = {p.name for p in spec.parameters}
+    for i, constraint in enumerate(spec.constraints):
+        for j, name in enumerate(getattr(constraint, "objects", [])):
+            if name not in objects:
+                yield ("constraints", i, "objects", j), (
+                    f"unknown object {name!r}; the objects are {', '.join(sorted(objects))}")
+        for j, name in enumerate(getattr(constraint, "regions", [])):
+            if name not in regions:
+                known = ", ".join(sorted(regions)) or "none: add them under workspace.regions"
+                yield ("constraints", i, "regions", j), f"unknown region {name!r}; the regions are {known}"
+        if isinstance(constraint, BoundsConstraint):
+            for j, group in enumerate(constraint.groups):
+                for k, name in enumerate(group):
+                    if name not in parameters:
+                        yield ("constraints", i, "groups", j, k), f"unknown parameter {name!r}"
+
+
+def _search(spec: Spec) -> Found:
+    dim = sum(p.size for p in spec.parameters)
+    x0 = spec.search.emitter.x0
+    if x0 is not None and len(x0) != dim:
+        yield ("search", "emitter", "x0"), f"has {len(x0)} values but theta has {dim} components"
+    sigma = spec.search.map_elites.sigma
+    if isinstance(sigma, list) and len(sigma) != dim:
+        yield ("search", "map_elites", "sigma"), (
+            f"has {len(sigma)} values but theta has {dim} components; give one number or {dim}")
+    cells = spec.search.surrogate.downsample_cells
+    if cells is not None:
+        if len(cells) != len(spec.measures):
+            yield ("search", "surrogate", "downsample_cells"), (
+                f"has {len(cells)} values, one per measure is needed ({len(spec.measures)})")
+        for i, (n, measure) in enumerate(zip(cells, spec.measures)):
+            if n > measure.cells:
+                yield ("search", "surrogate", "downsample_cells", i), (
+                    f"{n} cells is more than measure {measure.name!r} has ({measure.cells})")
+
+
+def _expression_names(spec: Spec, metrics: set[str]) -> Found:
+    parameters = {p.name for p in spec.parameters}
+    measures = {m.name for m in spec.measures}
+    numeric_scope = metrics | parameters
+    checks = [(("objective", "expr"), spec.objective.expr, numeric_scope, False)]
+    checks += [(("measures", i, "expr"), m.expr, numeric_scope, False) for i, m in enumerate(spec.measures)]
+    checks.append((("failure",), spec.failure, numeric_scope | measures | {"objective"}, True))
+    for path, text, scope, condition in checks:
+        unknown = sorted(expr.parse(text, condition=condition).names - scope)
+        if unknown:
+            yield path, (
+                f"unknown name{'s' if len(unknown) > 1 else ''} {', '.join(map(repr, unknown))}; "
+                f"known here: {', '.join(sorted(scope))}")
