@@ -1,0 +1,22 @@
+# Two commands set everything up on a fresh machine:
+#   make demo   creates .venv if missing, installs hritest, runs the main job on a bundled spec
+#   make test   creates .venv if missing, installs hritest with its test tools, runs the tests
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV ?= .venv
+BIN := $(VENV)/bin
+
+# torch goes first and alone, pinned: pip then takes the CPU wheel on disk instead of
+# resolving a multi-GB CUDA build for a bare `torch` requirement.
+$(BIN)/hritest: pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --disable-pip-version-check torch==2.13.0
+	$(BIN)/python -m pip install -q --disable-pip-version-check -e '.[test]'
+	touch $@
+
+.PHONY: demo test
+demo: $(BIN)/hritest
+	$(BIN)/hritest validate specs/*.yaml
+	$(BIN)/hritest show specs/collab.yaml
+
+test: $(BIN)/hritest
+	$(BIN)/python -m pytest
