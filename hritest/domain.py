@@ -15,99 +15,13 @@ import numpy as np
 import pydantic
 
 from hritest import plugins
+from hritest.constraints import ScenarioRepair
+from hritest.scenario import ScenarioSpace, Slot
 from hritest.errors import PluginError, SpecError
 from hritest.spec import Spec, source_of
 from hritest.spec import expr
+from hritest.repair import InfeasibleConstraints
 from hritest.spec.references import check_references
-
-
-@dataclass(frozen=True, kw_only=True)
-class Slot:
-    """The components ``theta[start:start + size]``, bound to one target of the scenario."""
-
-    name: str
-    bind: str
-    start: int
-    size: int
-    lower: float
-    upper: float
-
-    @property
-    def target(self) -> str:
-        return self.bind.split(".")[0]
-
-    @property
-    def attribute(self) -> str:
-        return self.bind.split(".")[1]
-
-    @property
-    def labels(self) -> list[str]:
-        return [self.name] if self.size == 1 else [f"{self.name}[{i}]" for i in range(self.size)]
-
-
-@dataclass(frozen=True, kw_only=True)
-class Scenario:
-    """One concrete scenario: where the objects are and the agents' model parameters."""
-
-    objects: Mapping[str, np.ndarray]
-    human: Mapping[str, Any]
-    robot: Mapping[str, Any]
-    task: Mapping[str, Any]
-    values: Mapping[str, float | np.ndarray] = field(default_factory=dict)
-
-
-@dataclass(frozen=True, kw_only=True)
-class ScenarioSpace:
-    """Theta's layout: which component means what, and its bounds."""
-
-    slots: tuple[Slot, ...]
-    nominal_objects: Mapping[str, np.ndarray]
-    nominal_params: Mapping[str, Mapping[str, Any]]
-
-    @property
-    def dim(self) -> int:
-        return sum(slot.size for slot in self.slots)
-
-    @property
-    def lower(self) -> np.ndarray:
-        return np.concatenate([np.full(s.size, s.lower) for s in self.slots])
-
-    @property
-    def upper(self) -> np.ndarray:
-        return np.concatenate([np.full(s.size, s.upper) for s in self.slots])
-
-    @property
-    def labels(self) -> list[str]:
-        return [label for slot in self.slots for label in slot.labels]
-
-    def values(self, theta: np.ndarray) -> dict[str, float | np.ndarray]:
-        """Parameter name -> its value (a float, or an array for a group)."""
-        theta = self._check(theta)
-        return {
-            s.name: float(theta[s.start]) if s.size == 1 else theta[s.start : s.start + s.size].copy()
-            for s in self.slots
-        }
-
-    def bind(self, theta: np.ndarray) -> Scenario:
-        """The scenario that ``theta`` describes: nominal values overridden by theta's."""
-        values = self.values(theta)
-        objects = {name: pos.copy() for name, pos in self.nominal_objects.items()}
-        params = {agent: dict(p) for agent, p in self.nominal_params.items()}
-        for slot in self.slots:
-            value = values[slot.name]
-            if slot.target in params:
-                params[slot.target][slot.attribute] = value
-            else:
-                objects[slot.target]["xy".index(slot.attribute)] = value
-        return Scenario(objects=objects, human=params["human"], robot=params["robot"], task=params["task"],
-                        values=values)
-
-    def _check(self, theta: np.ndarray) -> np.ndarray:
-        theta = np.asarray(theta, dtype=float)
-        if theta.shape != (self.dim,):
-            raise ValueError(f"theta has shape {theta.shape}; this spec's theta has {self.dim} components "
-                             f"({', '.join(self.labels)})")
-        return theta
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -130,6 +44,13 @@ class Domain:
     objective: expr.Expression
     measures: tuple[Measure, ...]
     failure: expr.Expression
+    repair: ScenarioRepair = field(repr=False)
+
+    def evaluate(self, theta: np.ndarray, *, seed: int = 0) -> Any:
+        """Repair -> simulate -> metrics for one theta: an :class:`hritest.evaluate.Evaluation`."""
+        from hritest.evaluate import evaluate
+
+        return evaluate(self, theta, seed=seed)
 
     @property
     def archive_dims(self) -> tuple[int, ...]:
@@ -173,13 +94,20 @@ def compile_spec(spec: Spec, *, base: Path | None = None) -> Domain:
     if found:
         raise SpecError([source.issue(path, message) for path, message in found], file=source.file)
 
+    space = ScenarioSpace(
+        slots=_slots(spec),
+        nominal_objects={o.name: np.array(o.position, dtype=float) for o in spec.objects},
+        nominal_params=nominal,
+    )
+    repair = ScenarioRepair(spec=spec, space=space)
+    try:
+        repair.check_feasible()
+    except InfeasibleConstraints as exc:
+        raise source.error(("constraints",), f"no scenario satisfies these constraints: {exc}") from None
     return Domain(
         spec=spec,
-        space=ScenarioSpace(
-            slots=_slots(spec),
-            nominal_objects={o.name: np.array(o.position, dtype=float) for o in spec.objects},
-            nominal_params=nominal,
-        ),
+        space=space,
+        repair=repair,
         task_cls=classes["task"],
         robot_cls=classes["robot"],
         human_cls=classes["human"],

@@ -17,15 +17,17 @@ from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
-from hritest.domain import Scenario
+from hritest.scenario import Scenario
 
 
 @dataclass(frozen=True)
 class RobotAction:
-    """A world-frame twist ``[vx, vy, vz, wx, wy, wz]`` and, for recording, the robot's belief."""
+    """A world-frame twist ``[vx, vy, vz, wx, wy, wz]``; for the task and recordings, the robot's
+    belief over the human's goal and the goal it is heading for, when it has them."""
 
     twist: np.ndarray
     belief: np.ndarray | None = None
+    goal: int | None = None
 
 
 @runtime_checkable

@@ -1,0 +1,131 @@
+"""One scenario, start to end: repair -> simulate -> metrics, as a picklable :class:`Evaluation`.
+
+Nothing raised by a plugin escapes: a crash, a NaN or a failed repair becomes an Evaluation
+with a status and a message naming the plugin, so a search never stops for one bad scenario.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import traceback
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from hritest.domain import Domain
+from hritest.scenario import Scenario
+from hritest.protocols import Rollout
+
+OK = "ok"
+
+
+@dataclass(frozen=True, kw_only=True)
+class Evaluation:
+    """The outcome of one scenario.
+
+    ``objective`` is the raw objective (what the result archive and the report see);
+    ``search_objective`` subtracts the weighted repair cost (what the search archive sees).
+    """
+
+    theta: np.ndarray
+    theta_repaired: np.ndarray
+    repair_cost: float
+    regions: dict[str, str | None]
+    seed: int
+    status: str = OK
+    message: str = ""
+    objective: float = math.nan
+    search_objective: float = math.nan
+    measures: np.ndarray = field(default_factory=lambda: np.array([]))
+    metrics: dict[str, float] = field(default_factory=dict)
+    occupancy: np.ndarray | None = None
+    failure: bool = False
+    seconds: float = 0.0
+
+    @property
+    def ok(self) -> bool:
+        return self.status == OK
+
+
+def evaluate(domain: Domain, theta: np.ndarray, *, seed: int = 0) -> Evaluation:
+    """Repairs, simulates and scores ``theta``."""
+    return evaluate_with_rollout(domain, theta, seed=seed)[0]
+
+
+def evaluate_with_rollout(domain: Domain, theta: np.ndarray, *, seed: int = 0) -> tuple[Evaluation, Rollout | None]:
+    """:func:`evaluate`, also returning the rollout (None when the scenario did not simulate).
+
+    For recording and replay; searches call :func:`evaluate`, since rollouts are large.
+    """
+    start = time.perf_counter()
+    theta = np.asarray(theta, dtype=float)
+    repaired = domain.repair(theta)
+    base = dict(theta=theta.copy(), theta_repaired=repaired.theta, repair_cost=repaired.cost,
+                regions=repaired.regions, seed=seed)
+    rollout = None
+    if not repaired.ok:
+        evaluation = Evaluation(**base, status=repaired.status, message=repaired.message)
+    else:
+        scenario = domain.space.bind(repaired.theta)
+        try:
+            rollout = simulate(domain, scenario, seed=seed)
+        except Exception as exc:  # noqa: BLE001 - a plugin's crash fails this scenario only
+            evaluation = Evaluation(**base, status="plugin_error", message=_blame(domain, exc))
+        else:
+            evaluation = _score(domain, scenario, rollout, base)
+    return replace(evaluation, seconds=time.perf_counter() - start), rollout
+
+
+def simulate(domain: Domain, scenario: Scenario, *, seed: int) -> Rollout:
+    """Builds the plugins for ``scenario`` and runs one episode; exceptions propagate."""
+    task_rng, robot_rng, human_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(3))
+    task = domain.task_cls(params=_params(domain.task_cls, scenario.task), scenario=scenario, spec=domain.spec)
+    robot = domain.robot_cls(params=_params(domain.robot_cls, scenario.robot), scenario=scenario, rng=robot_rng)
+    human = domain.human_cls(params=_params(domain.human_cls, scenario.human), scenario=scenario, rng=human_rng)
+    return task.run(robot=robot, human=human, rng=task_rng)
+
+
+def _params(cls: type, values: dict[str, Any]) -> Any:
+    model = getattr(cls, "Params", None)
+    return model.model_validate(values) if model is not None else dict(values)
+
+
+def _score(domain: Domain, scenario: Scenario, rollout: Rollout, base: dict) -> Evaluation:
+    env: dict[str, Any] = {**rollout.metrics, **scenario.values}
+    try:
+        objective = float(domain.objective.evaluate(env))
+        measures = np.array([float(m.expression.evaluate(env)) for m in domain.measures])
+    except (KeyError, ZeroDivisionError, ValueError, TypeError) as exc:
+        return Evaluation(**base, status="metric_error",
+                          message=f"{type(exc).__name__}: {exc} (metrics: {sorted(rollout.metrics)})")
+    occupancy = (np.stack([rollout.occupancy[a] for a in domain.task_cls.agents])
+                 if rollout.occupancy else None)
+    if not (math.isfinite(objective) and np.all(np.isfinite(measures))):
+        return Evaluation(**base, status="nan", objective=objective, measures=measures,
+                          metrics=dict(rollout.metrics),
+                          message=f"objective {objective} or measures {measures.tolist()} not finite")
+    names = {"objective": objective, **{m.name: v for m, v in zip(domain.measures, measures)}}
+    failure = bool(domain.failure.evaluate({**env, **names}))
+    return Evaluation(
+        **base,
+        objective=objective,
+        search_objective=objective - domain.spec.objective.repair_weight * base["repair_cost"],
+        measures=measures,
+        metrics={k: float(v) for k, v in rollout.metrics.items()},
+        occupancy=occupancy,
+        failure=failure,
+    )
+
+
+def _blame(domain: Domain, exc: BaseException) -> str:
+    """A message naming the plugin whose code raised, with the traceback."""
+    modules = {cls.__module__: (kind, cls) for kind, cls in
+               (("task", domain.task_cls), ("robot", domain.robot_cls), ("human", domain.human_cls))}
+    culprit = None
+    for frame, _ in traceback.walk_tb(exc.__traceback__):
+        culprit = modules.get(frame.f_globals.get("__name__"), culprit)
+    where = f"{culprit[0]} plugin {culprit[1].__qualname__}" if culprit else "the simulation"
+    trace = "".join(traceback.format_exception(exc)).rstrip()
+    return f"{where} raised {type(exc).__name__}: {exc}\n{trace}"
