@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import os
 from pathlib import Path
 from typing import Annotated
 
@@ -110,3 +111,199 @@ def show(spec: SpecArg) -> None:
     for c in s.constraints:
         out.print("constraint " + ", ".join(f"{k}={v}" for k, v in c.model_dump().items()), highlight=False)
     out.print(f"search {s.search.algorithm}, budget {s.search.budget}, seed {s.search.seed}", highlight=False)
+
+
+ThetaOption = Annotated[str, typer.Option("--theta", help="comma-separated theta, in the order 'hritest show' lists",
+                                          show_default=False)]
+JsonOption = Annotated[bool, typer.Option("--json", help="print JSON instead of a table")]
+
+
+def _domain_and_theta(spec: Path, theta: str):  # noqa: ANN202 - (Domain, np.ndarray)
+    import numpy as np
+
+    from hritest.domain import compile_spec
+    from hritest.spec import load_spec
+
+    domain = compile_spec(load_spec(spec))
+    try:
+        values = np.array([float(v) for v in theta.replace(" ", "").split(",") if v != ""])
+    except ValueError:
+        raise typer.BadParameter(f"{theta!r} is not a comma-separated list of numbers",
+                                 param_hint="--theta") from None
+    if values.shape != (domain.space.dim,):
+        raise typer.BadParameter(
+            f"got {len(values)} values; {spec} needs {domain.space.dim}: {', '.join(domain.space.labels)}",
+            param_hint="--theta")
+    return domain, values
+
+
+def _print_json(data: dict) -> None:
+    import json
+
+    print(json.dumps(data, indent=2, default=float))
+
+
+@command
+def repair(spec: SpecArg, theta: ThetaOption, json: JsonOption = False) -> None:
+    """Repair one scenario: where its objects move to satisfy the constraints, and at what cost."""
+    domain, values = _domain_and_theta(spec, theta)
+    outcome = domain.repair(values)
+    data = {"status": outcome.status, "theta": values.tolist(), "repaired": outcome.theta.tolist(),
+            "cost": outcome.cost, "regions": outcome.regions, "message": outcome.message}
+    if json:
+        _print_json(data)
+    else:
+        table = Table(title=f"repair: {outcome.status}, cost {outcome.cost:.6g}", title_justify="left")
+        for column in ("component", "given", "repaired", "moved"):
+            table.add_column(column, justify="left" if column == "component" else "right")
+        for label, a, b in zip(domain.space.labels, values, outcome.theta):
+            table.add_row(label, f"{a:.6g}", f"{b:.6g}", f"{b - a:+.3g}" if b != a else "")
+        out.print(table)
+        for name, region in outcome.regions.items():
+            out.print(f"{name} placed in {region}", highlight=False)
+        if outcome.message:
+            out.print(outcome.message, highlight=False)
+    if not outcome.ok:
+        raise typer.Exit(EXIT_FINDING)
+
+
+@command
+def simulate(
+    spec: SpecArg,
+    theta: ThetaOption,
+    seed: Annotated[int, typer.Option(help="the evaluation seed")] = 0,
+    json: JsonOption = False,
+) -> None:
+    """Simulate one scenario: status, objective, measures and every metric. Exit 1 if it is a failure."""
+    domain, values = _domain_and_theta(spec, theta)
+    evaluation = domain.evaluate(values, seed=seed)
+    data = {
+        "status": evaluation.status,
+        "failure": evaluation.failure,
+        "objective": evaluation.objective,
+        "search_objective": evaluation.search_objective,
+        "measures": dict(zip((m.name for m in domain.measures), evaluation.measures.tolist())),
+        "metrics": evaluation.metrics,
+        "theta": values.tolist(),
+        "theta_repaired": evaluation.theta_repaired.tolist(),
+        "repair_cost": evaluation.repair_cost,
+        "regions": evaluation.regions,
+        "seed": seed,
+        "seconds": evaluation.seconds,
+        "message": evaluation.message,
+    }
+    if json:
+        _print_json(data)
+    else:
+        verdict = "[red]FAILURE[/red]" if evaluation.failure else "[green]no failure[/green]"
+        out.print(f"{evaluation.status}: {verdict} ({domain.spec.failure}), simulated in {evaluation.seconds:.3f} s")
+        table = Table(show_header=False)
+        rows = [("objective", evaluation.objective), ("search objective", evaluation.search_objective),
+                ("repair cost", evaluation.repair_cost), *data["measures"].items(), *evaluation.metrics.items()]
+        for name, value in rows:
+            table.add_row(name, f"{value:.6g}")
+        out.print(table)
+        if evaluation.message:
+            err.print(evaluation.message, markup=False, highlight=False)
+    if not evaluation.ok:
+        raise typer.Exit(EXIT_INPUT)
+    if evaluation.failure:
+        raise typer.Exit(EXIT_FINDING)
+
+
+@command
+def search(
+    spec: Annotated[Path | None, typer.Argument(help="the spec to search (omit with --resume)",
+                                                show_default=False)] = None,
+    resume: Annotated[Path | None, typer.Option(help="continue the killed run in this run directory",
+                                                rich_help_panel="Run")] = None,
+    algorithm: Annotated[str | None, typer.Option(help="random, map_elites, cma_mae (default: the spec's)",
+                                                  rich_help_panel="Search")] = None,
+    budget: Annotated[int | None, typer.Option(min=1, help="real evaluations (default: the spec's)",
+                                               rich_help_panel="Search")] = None,
+    seed: Annotated[int | None, typer.Option(help="default: the spec's", rich_help_panel="Search")] = None,
+    out: Annotated[Path | None, typer.Option(help="run directory (default: runs/<spec>-<time>)",
+                                             rich_help_panel="Run")] = None,
+    workers: Annotated[int, typer.Option(help="local worker processes (default: all cores)",
+                                         rich_help_panel="Run")] = os.cpu_count() or 1,
+    cluster: Annotated[str | None, typer.Option(help="Dask scheduler address, e.g. tcp://host:8786",
+                                                rich_help_panel="Run")] = None,
+    timeout: Annotated[float, typer.Option(help="seconds one scenario may take before it is stopped",
+                                           rich_help_panel="Run")] = 300.0,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress bar (for CI)")] = False,
+) -> None:
+    """Search for diverse failures; writes a run directory. Exit 1 if failures were found."""
+    from hritest import search as qd
+
+    if (spec is None) == (resume is None):
+        raise typer.BadParameter("give a SPEC to start a search, or --resume RUN to continue one (not both)")
+    if workers < 1:
+        raise typer.BadParameter(f"must be at least 1, got {workers}", param_hint="--workers")
+    backend = qd.Backend(workers=workers, cluster=cluster, timeout=timeout)
+    with _progress(quiet) as progress:
+        if resume is not None:
+            found = qd.resume(run_path=resume, backend=backend, progress=progress)
+        else:
+            found = qd.start(spec_file=spec, out=out, algorithm=algorithm, budget=budget, seed=seed,
+                             backend=backend, progress=progress)
+    _print_summary(found)
+    if found.failures():
+        raise typer.Exit(EXIT_FINDING)
+
+
+class _progress:
+    """A rich progress bar fed by search snapshots (nothing at all with ``quiet``)."""
+
+    def __init__(self, quiet: bool) -> None:
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+        self.bar = None if quiet else Progress(
+            TextColumn("[bold]search"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[stats]}"),
+            TimeRemainingColumn(), console=err, transient=True)
+        self.task = None
+        self.stats = "starting"
+
+    def __enter__(self):  # noqa: ANN204
+        if self.bar:
+            self.bar.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.bar:
+            self.bar.stop()
+
+    def __call__(self, snapshot) -> None:  # noqa: ANN001 - hritest.search.Snapshot
+        if self.bar is None:
+            return
+        if self.task is None:
+            self.task = self.bar.add_task("search", total=snapshot.budget, stats=self.stats)
+        if snapshot.summary is not None:
+            s = snapshot.summary
+            self.stats = (f"QD-score {s.qd_score:,.1f}  coverage {s.coverage:.1%}  best {s.best:.3g}  "
+                          f"failures {snapshot.failures}")
+        self.bar.update(self.task, completed=snapshot.evaluations, stats=self.stats)
+
+
+def _print_summary(found) -> None:  # noqa: ANN001 - hritest.search.Search
+    from hritest.search.archives import Summary
+
+    state = found.state
+    summary = Summary.of(state["result"], found.domain.spec.objective.range)
+    statuses: dict[str, int] = {}
+    for record in found.records.values():
+        statuses[record["status"]] = statuses.get(record["status"], 0) + 1
+    table = Table(title=f"{found.domain.spec.name}: {state['algorithm']}, seed {state['seed']}",
+                  title_justify="left", show_header=False)
+    rows = [
+        ("run directory", str(found.run_dir.path)),
+        ("evaluations", f"{state['evaluations']} ({', '.join(f'{n} {k}' for k, n in sorted(statuses.items()))})"),
+        ("wall time", f"{state['elapsed']:.1f} s"),
+        ("QD-score", f"{summary.qd_score:,.2f} (normalised {summary.normalized_qd_score:.4f})"),
+        ("coverage", f"{summary.coverage:.2%} of {found.state['result'].cells} cells"),
+        ("best objective", f"{summary.best:.4g}"),
+        ("failures", f"{len(found.failures())} elites meet '{found.domain.spec.failure}'"),
+    ]
+    for name, value in rows:
+        table.add_row(name, value)
+    out.print(table)
+

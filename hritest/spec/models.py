@@ -196,6 +196,7 @@ class EmitterSettings(Strict):
 class MapElitesSettings(Strict):
     batch_size: PositiveInt = 20
     sigma: PositiveFloat | list[PositiveFloat] = 0.01
+    x0: list[float] | None = Field(None, description="where the first batch is sampled around; default: emitter.x0")
 
 
 class RandomSettings(Strict):

@@ -97,6 +97,9 @@ def _search(spec: Spec) -> Found:
     x0 = spec.search.emitter.x0
     if x0 is not None and len(x0) != dim:
         yield ("search", "emitter", "x0"), f"has {len(x0)} values but theta has {dim} components"
+    me_x0 = spec.search.map_elites.x0
+    if me_x0 is not None and len(me_x0) != dim:
+        yield ("search", "map_elites", "x0"), f"has {len(me_x0)} values but theta has {dim} components"
     sigma = spec.search.map_elites.sigma
     if isinstance(sigma, list) and len(sigma) != dim:
         yield ("search", "map_elites", "sigma"), (

@@ -1,0 +1,191 @@
+"""The run directory: everything a search leaves behind, written so a kill loses nothing.
+
+Layout of ``runs/<spec>-<timestamp>/``::
+
+    spec.yaml          the spec as it was when the run started
+    run.json           spec digest and origin, algorithm, seed, budget, versions
+    evaluations.jsonl  every finished evaluation, one JSON object a line, append-only
+    occupancy.f32      its occupancy grids, fixed-size float32 records in the same order
+    checkpoint.pkl     the search's state at the last step (archives, scheduler, pending batch)
+    progress.csv       evaluations, wall time, QD-score, coverage, best, failures
+    archive.csv        the result archive's elites
+    failures.yaml      the elites that meet the spec's failure condition
+
+Whole files are replaced atomically (write a temporary file, then rename); the two append-only
+files may end in a torn record after a kill, which :meth:`RunDirectory.evaluations` drops.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import json
+import os
+import pickle
+import platform
+import shutil
+import tempfile
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hritest.errors import HritestError
+
+RUN_FILE = "run.json"
+FORMAT = 1
+
+
+class RunDirectoryError(HritestError):
+    """A folder that is not a usable hritest run directory."""
+
+
+def atomic_write(path: Path, data: bytes | str) -> None:
+    """Writes ``path`` so that readers see the old file or the new one, never a part."""
+    raw = data.encode() if isinstance(data, str) else data
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(raw)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def digest(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def versions() -> dict[str, str]:
+    from importlib.metadata import PackageNotFoundError, version
+
+    found = {"python": platform.python_version(), "machine": platform.machine()}
+    for package in ("hritest", "numpy", "ribs", "mujoco", "ortools", "torch"):
+        try:
+            found[package] = version(package)
+        except PackageNotFoundError:
+            found[package] = "missing"
+    return found
+
+
+class RunDirectory:
+    """One search's folder. Create with :meth:`create`, reopen with :meth:`open`."""
+
+    def __init__(self, path: Path, meta: dict[str, Any]):
+        self.path = Path(path)
+        self.meta = meta
+
+    @classmethod
+    def create(cls, *, root: Path, spec_file: Path, name: str, meta: dict[str, Any],
+               folder: Path | None = None) -> RunDirectory:
+        """A new run folder under ``root`` (or exactly ``folder``), with the spec and ``run.json``."""
+        stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
+        path = Path(folder) if folder else Path(root) / f"{name}-{stamp}"
+        if path.exists() and any(path.iterdir()):
+            raise RunDirectoryError(f"{path} already exists and is not empty; choose another --out or remove it")
+        path.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(spec_file, path / "spec.yaml")
+        meta = {
+            "format": FORMAT,
+            "spec_file": str(Path(spec_file).resolve()),
+            "spec_digest": digest(spec_file),
+            "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            "versions": versions(),
+            **meta,
+        }
+        atomic_write(path / RUN_FILE, json.dumps(meta, indent=2))
+        return cls(path, meta)
+
+    @classmethod
+    def open(cls, path: Path) -> RunDirectory:
+        """Reopens a run folder, checking that it is one.
+
+        Raises:
+            RunDirectoryError: missing folder, missing or unreadable ``run.json``, foreign format.
+        """
+        path = Path(path)
+        if not path.is_dir():
+            raise RunDirectoryError(f"{path} is not a folder; give the run directory that 'hritest search' wrote")
+        try:
+            meta = json.loads((path / RUN_FILE).read_text())
+        except FileNotFoundError:
+            raise RunDirectoryError(f"{path} has no {RUN_FILE}: it is not a hritest run directory") from None
+        except (OSError, json.JSONDecodeError) as exc:
+            raise RunDirectoryError(f"{path / RUN_FILE} is corrupt ({exc}); the run cannot be read") from None
+        if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+            raise RunDirectoryError(f"{path / RUN_FILE} is not a hritest run (format {FORMAT}) file")
+        if not (path / "spec.yaml").is_file():
+            raise RunDirectoryError(f"{path} has no spec.yaml; the run cannot be resumed or reported")
+        return cls(path, meta)
+
+    # --- evaluations -------------------------------------------------------------------------
+
+    def append(self, record: dict[str, Any], occupancy: np.ndarray | None, shape: tuple[int, ...]) -> None:
+        """Appends one evaluation: its occupancy record first, then its line (which commits it)."""
+        grid = np.zeros(shape, np.float32) if occupancy is None else np.asarray(occupancy, np.float32)
+        with open(self.path / "occupancy.f32", "ab") as handle:
+            handle.write(grid.tobytes())
+        with open(self.path / "evaluations.jsonl", "a") as handle:
+            handle.write(json.dumps(record, separators=(",", ":")) + "\n")
+
+    def evaluations(self) -> list[dict[str, Any]]:
+        """Every committed evaluation, in order (a torn last line from a kill is dropped)."""
+        path = self.path / "evaluations.jsonl"
+        if not path.exists():
+            return []
+        lines = path.read_text().splitlines()
+        records = []
+        for number, line in enumerate(lines, start=1):
+            try:
+                records.append(json.loads(line))
+            except json.JSONDecodeError:
+                if number != len(lines):
+                    raise RunDirectoryError(f"{path}:{number} is corrupt; the run cannot be read") from None
+        return records
+
+    def occupancy(self, shape: tuple[int, ...]) -> np.ndarray:
+        """``(evaluations, *shape)`` occupancy grids of the committed evaluations."""
+        size = int(np.prod(shape))
+        path = self.path / "occupancy.f32"
+        data = np.fromfile(path, dtype=np.float32) if path.exists() else np.zeros(0, np.float32)
+        count = len(data) // size
+        return data[: count * size].reshape(count, *shape)
+
+    def truncate(self, count: int, shape: tuple[int, ...]) -> None:
+        """Cuts both append-only files back to ``count`` committed evaluations (used on resume)."""
+        lines = (self.path / "evaluations.jsonl").read_text().splitlines(keepends=True) if count else []
+        atomic_write(self.path / "evaluations.jsonl", "".join(lines[:count]))
+        path = self.path / "occupancy.f32"
+        if path.exists():
+            with open(path, "r+b") as handle:
+                handle.truncate(count * int(np.prod(shape)) * 4)
+
+    # --- state and summaries -----------------------------------------------------------------
+
+    def save_checkpoint(self, state: dict[str, Any]) -> None:
+        atomic_write(self.path / "checkpoint.pkl", pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL))
+
+    def load_checkpoint(self) -> dict[str, Any] | None:
+        path = self.path / "checkpoint.pkl"
+        if not path.exists():
+            return None
+        try:
+            return pickle.loads(path.read_bytes())
+        except Exception as exc:  # noqa: BLE001 - any unpickling failure means the same thing
+            raise RunDirectoryError(f"{path} is corrupt ({type(exc).__name__}); the run cannot be resumed") from None
+
+    def write_csv(self, name: str, rows: list[dict[str, Any]]) -> None:
+        buffer = io.StringIO()
+        if rows:
+            writer = csv.DictWriter(buffer, fieldnames=list(rows[0]))
+            writer.writeheader()
+            writer.writerows(rows)
+        atomic_write(self.path / name, buffer.getvalue())
+
+    def write_text(self, name: str, text: str) -> None:
+        atomic_write(self.path / name, text)

@@ -1,0 +1,105 @@
+"""Quality-diversity search over a domain's scenarios, into a run directory.
+
+``start`` begins a run, ``resume`` continues a killed one; both return the finished
+:class:`Search`, whose run directory holds everything (see :mod:`hritest.rundir`).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from hritest.domain import Domain, compile_spec
+from hritest.errors import HritestError
+from hritest.rundir import RunDirectory, RunDirectoryError, digest
+from hritest.search.executor import DomainRef, Evaluator, local_pool
+from hritest.search.loop import ALGORITHMS, Search, Snapshot
+from hritest.spec import load_spec
+
+__all__ = ["ALGORITHMS", "Backend", "Search", "Snapshot", "resume", "start"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class Backend:
+    """Where evaluations run: ``workers`` local processes, or a Dask cluster at ``cluster``."""
+
+    workers: int = os.cpu_count() or 1
+    cluster: str | None = None
+    timeout: float = 300.0
+
+    def evaluator(self, ref: DomainRef) -> Evaluator:
+        if self.workers < 1:
+            raise HritestError(f"--workers must be at least 1, got {self.workers}")
+        if self.cluster is None:
+            return Evaluator(ref=ref, make_executor=lambda: local_pool(self.workers), workers=self.workers,
+                             timeout=self.timeout)
+        client = _dask_client(self.cluster)
+        workers = max(1, sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()))
+        return Evaluator(ref=ref, make_executor=client.get_executor, workers=workers, timeout=self.timeout)
+
+
+def _dask_client(address: str):  # noqa: ANN202 - distributed.Client
+    try:
+        from distributed import Client
+    except ImportError:
+        raise HritestError("--cluster needs Dask: pip install 'hritest[cluster]'") from None
+    try:
+        return Client(address, timeout=10)
+    except (OSError, TimeoutError) as exc:
+        raise HritestError(f"cannot reach the Dask scheduler at {address} ({exc}); check the address and that "
+                           "'dask scheduler' is running there") from None
+
+
+def start(*, spec_file: Path, out: Path | None, root: Path = Path("runs"), algorithm: str | None = None,
+          budget: int | None = None, seed: int | None = None, backend: Backend = Backend(),
+          progress: Callable[[Snapshot], None] = lambda s: None) -> Search:
+    """Runs a new search of the spec at ``spec_file``; arguments given override the spec's ``search``."""
+    spec = load_spec(spec_file)
+    domain = compile_spec(spec)
+    settings = spec.search
+    algorithm = algorithm or settings.algorithm
+    if algorithm not in ALGORITHMS:
+        raise HritestError(f"algorithm {algorithm!r} is not available yet; choose one of {', '.join(ALGORITHMS)}")
+    budget = budget if budget is not None else settings.budget
+    seed = seed if seed is not None else settings.seed
+    ref = DomainRef(spec=str(Path(spec_file).resolve()), base=str(Path(spec_file).resolve().parent))
+    evaluator = backend.evaluator(ref)  # before the folder exists: a bad backend leaves nothing behind
+    try:
+        run = RunDirectory.create(root=root, spec_file=spec_file, name=spec.name, folder=out,
+                                  meta={"algorithm": algorithm, "budget": budget, "seed": seed,
+                                        "spec_base": ref.base})
+        search = Search.new(domain=domain, run=run, algorithm=algorithm, budget=budget, seed=seed)
+        search.run(evaluator, progress)
+    finally:
+        evaluator.close()
+    return search
+
+
+def resume(*, run_path: Path, backend: Backend = Backend(),
+           progress: Callable[[Snapshot], None] = lambda s: None) -> Search:
+    """Continues the run at ``run_path`` from its last checkpoint.
+
+    Raises:
+        RunDirectoryError: not a run directory, or its spec changed since the run started.
+    """
+    run = RunDirectory.open(run_path)
+    original = Path(run.meta["spec_file"])
+    if original.is_file() and digest(original) != run.meta["spec_digest"]:
+        raise RunDirectoryError(
+            f"{original} changed since this run started; resuming would mix two different searches. "
+            f"Start a new run, or restore the spec (the run's copy is {run.path / 'spec.yaml'})")
+    domain = _domain_of(run)
+    ref = DomainRef(spec=str(run.path / "spec.yaml"), base=run.meta["spec_base"])
+    evaluator = backend.evaluator(ref)
+    try:
+        search = Search.resume(domain=domain, run=run)
+        search.run(evaluator, progress)
+    finally:
+        evaluator.close()
+    return search
+
+
+def _domain_of(run: RunDirectory) -> Domain:
+    return compile_spec(load_spec(run.path / "spec.yaml"), base=Path(run.meta["spec_base"]))

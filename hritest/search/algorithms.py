@@ -1,0 +1,67 @@
+"""The model-free algorithms as pyribs schedulers: Random, MAP-Elites and CMA-MAE.
+
+Settings come from the spec (defaults: the paper's). Every emitter gets its own seed drawn
+from the run's seed, so a run is reproducible from the spec and seed alone.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from ribs.emitters import EmitterBase, EvolutionStrategyEmitter, GaussianEmitter
+from ribs.schedulers import Scheduler
+
+from hritest.domain import Domain
+
+MODEL_FREE = ("random", "map_elites", "cma_mae")
+
+
+class UniformEmitter(EmitterBase):
+    """Uniform samples within the parameter bounds: the paper's Random Search as an emitter.
+
+    pyribs has no such emitter; this keeps Random on the same ask/tell loop as the others.
+    """
+
+    def __init__(self, archive, *, lower: np.ndarray, upper: np.ndarray, batch_size: int, seed: int) -> None:  # noqa: ANN001
+        super().__init__(archive, solution_dim=archive.solution_dim, bounds=None, lower_bounds=None,
+                         upper_bounds=None)
+        self._lower, self._upper = np.asarray(lower), np.asarray(upper)
+        self._batch_size = batch_size
+        self._rng = np.random.default_rng(seed)
+
+    @property
+    def batch_size(self) -> int:
+        return self._batch_size
+
+    def ask(self) -> np.ndarray:
+        return self._rng.uniform(self._lower, self._upper, size=(self._batch_size, len(self._lower)))
+
+
+def x0(domain: Domain) -> np.ndarray:
+    """The emitters' start: the spec's ``x0`` or the centre of the parameter bounds."""
+    given = domain.spec.search.emitter.x0
+    return np.array(given, dtype=float) if given is not None else (domain.space.lower + domain.space.upper) / 2
+
+
+def scheduler(domain: Domain, algorithm: str, archive, *, seed: int) -> Scheduler:  # noqa: ANN001
+    """The pyribs scheduler of a model-free ``algorithm`` over the search ``archive``."""
+    search = domain.spec.search
+    seeds = np.random.SeedSequence(seed).generate_state(search.emitter.emitters + 1)
+    if algorithm == "random":
+        emitters = [UniformEmitter(archive, lower=domain.space.lower, upper=domain.space.upper,
+                                   batch_size=search.random.batch_size, seed=int(seeds[0]))]
+    elif algorithm == "map_elites":
+        settings = search.map_elites
+        start = np.array(settings.x0, dtype=float) if settings.x0 is not None else x0(domain)
+        emitters = [GaussianEmitter(archive, sigma=settings.sigma, x0=start, batch_size=settings.batch_size,
+                                    seed=int(seeds[0]))]
+    elif algorithm == "cma_mae":
+        settings = search.emitter
+        emitters = [
+            EvolutionStrategyEmitter(archive, x0=x0(domain), sigma0=settings.sigma0, ranker="imp",
+                                     selection_rule="mu", restart_rule="basic",
+                                     batch_size=settings.batch_size, seed=int(s))
+            for s in seeds[1:]
+        ]
+    else:
+        raise ValueError(f"{algorithm!r} is not a model-free algorithm; those are {', '.join(MODEL_FREE)}")
+    return Scheduler(archive, emitters)

@@ -1,0 +1,197 @@
+"""Evaluating many scenarios in parallel without letting any one of them stop the search.
+
+Jobs go to a ``concurrent.futures.Executor``: a local process pool by default, or a Dask
+cluster's executor, so the search does not know which. Results stream back as they finish.
+Faults are contained: an evaluation that raises or returns NaN is already an Evaluation with a
+status (see :mod:`hritest.evaluate`); one that runs past the per-scenario timeout is stopped in
+its worker (or, if it does not yield, its worker is killed); a worker that dies takes down only
+the jobs it held. Every failed job is retried once, on its own when a crash is suspected, so a
+scenario that kills its worker cannot take its neighbours' retries with it.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import os
+import signal
+import threading
+import time
+from collections.abc import Callable, Iterable
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass, replace
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+
+from hritest.evaluate import Evaluation, evaluate
+
+
+@dataclass(frozen=True)
+class DomainRef:
+    """How a worker finds the domain: the spec file and the folder its plugin paths are relative to.
+
+    Workers compile the spec once and keep it, so a job carries only theta and a seed.
+    """
+
+    spec: str
+    base: str
+
+
+@dataclass(frozen=True)
+class Job:
+    index: int
+    theta: np.ndarray
+    seed: int
+
+
+class EvaluationTimeout(Exception):
+    """Raised inside a worker when an evaluation runs past its time limit."""
+
+
+@cache
+def _domain(ref: DomainRef):  # noqa: ANN202 - a Domain
+    from hritest.domain import compile_spec
+    from hritest.spec import load_spec
+
+    return compile_spec(load_spec(ref.spec), base=Path(ref.base))
+
+
+def worker_init() -> None:
+    """One thread per worker: the pool already uses every core."""
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    try:
+        import torch
+
+        torch.set_num_threads(1)
+    except ImportError:  # torch is a dependency, but a worker needs none of it
+        pass
+
+
+def run_job(ref: DomainRef, job: Job, timeout: float) -> Evaluation:
+    """Evaluates one job in a worker, stopping it after ``timeout`` seconds where signals allow."""
+    domain = _domain(ref)
+    on_main = threading.current_thread() is threading.main_thread()
+    if on_main and timeout > 0:
+        previous = signal.signal(signal.SIGALRM, _raise_timeout)
+        signal.setitimer(signal.ITIMER_REAL, timeout)
+    try:
+        return evaluate(domain, job.theta, seed=job.seed)
+    except EvaluationTimeout:
+        return _failed(job, "timeout", f"the evaluation ran past its {timeout:g} s limit and was stopped")
+    finally:
+        if on_main and timeout > 0:
+            signal.setitimer(signal.ITIMER_REAL, 0)
+            signal.signal(signal.SIGALRM, previous)
+
+
+def _raise_timeout(signum, frame) -> None:  # noqa: ANN001
+    raise EvaluationTimeout
+
+
+def _failed(job: Job, status: str, message: str) -> Evaluation:
+    theta = np.asarray(job.theta, dtype=float)
+    return Evaluation(theta=theta, theta_repaired=theta, repair_cost=float("nan"), regions={}, seed=job.seed,
+                      status=status, message=message)
+
+
+def local_pool(workers: int) -> cf.ProcessPoolExecutor:
+    return cf.ProcessPoolExecutor(max_workers=workers, initializer=worker_init)
+
+
+class Evaluator:
+    """Runs jobs on an executor with retries, timeouts and crash isolation.
+
+    Args:
+        ref: the domain the workers evaluate.
+        make_executor: builds a fresh executor (called again after a worker dies).
+        workers: how many jobs to keep in flight; each starts as soon as it is submitted.
+        timeout: seconds one scenario may take; a worker stuck past twice that is killed.
+    """
+
+    def __init__(self, *, ref: DomainRef, make_executor: Callable[[], cf.Executor], workers: int,
+                 timeout: float) -> None:
+        self.ref, self.make_executor, self.workers, self.timeout = ref, make_executor, workers, timeout
+        self.executor = make_executor()
+
+    def close(self) -> None:
+        self.executor.shutdown(wait=False, cancel_futures=True)
+
+    def run(self, jobs: Iterable[Job], on_result: Callable[[Job, Evaluation], None]) -> None:
+        """Evaluates every job, calling ``on_result`` for each as it finishes (in any order)."""
+        queue = list(jobs)[::-1]          # pop() takes them in order
+        suspects: list[Job] = []          # jobs in flight when a worker died: rerun one at a time
+        attempts: dict[int, int] = {}
+        running: dict[cf.Future, tuple[Job, float]] = {}
+        while queue or suspects or running:
+            capacity = 1 if suspects else self.workers
+            while len(running) < capacity and (suspects or queue):
+                job = suspects.pop() if suspects else queue.pop()
+                running[self.executor.submit(run_job, self.ref, job, self.timeout)] = (job, time.monotonic())
+            done, _ = cf.wait(running, timeout=1.0, return_when=cf.FIRST_COMPLETED)
+            if not done and self._kill_stuck(running):
+                for job, started in running.values():
+                    if time.monotonic() - started >= self._hard_limit:
+                        self._retry_or_report(job, attempts, queue, on_result, "timeout",
+                                              f"the evaluation ran past {self._hard_limit:g} s and its worker "
+                                              "was killed")
+                    else:
+                        queue.append(job)  # an innocent bystander: no attempt counted
+                self._restart(running)
+                continue
+            broken = False
+            for future in done:
+                job, _ = running.pop(future)
+                try:
+                    evaluation = future.result()
+                except (BrokenProcessPool, cf.CancelledError):
+                    broken = True
+                    self._retry_or_report(job, attempts, suspects, on_result, "crashed",
+                                          "the worker process died while evaluating this scenario")
+                    continue
+                except Exception as exc:  # noqa: BLE001 - e.g. a pickling problem or a lost Dask worker
+                    evaluation = _failed(job, "crashed", f"{type(exc).__name__}: {exc}")
+                if evaluation.ok or attempts.get(job.index, 0) >= 1:
+                    on_result(job, _note_retry(evaluation, attempts.get(job.index, 0)))
+                else:
+                    attempts[job.index] = 1
+                    queue.append(job)
+            if broken:
+                for job, _ in running.values():
+                    self._retry_or_report(job, attempts, suspects, on_result, "crashed",
+                                          "the worker process died while evaluating this scenario")
+                self._restart(running)
+
+    @property
+    def _hard_limit(self) -> float:
+        return 2 * self.timeout + 5
+
+    def _restart(self, running: dict) -> None:
+        running.clear()
+        self.executor.shutdown(wait=False, cancel_futures=True)
+        self.executor = self.make_executor()
+
+    def _retry_or_report(self, job: Job, attempts: dict[int, int], again: list[Job],
+                         on_result: Callable[[Job, Evaluation], None], status: str, message: str) -> None:
+        if attempts.get(job.index, 0) >= 1:
+            on_result(job, _failed(job, status, message + " (also on its retry)"))
+        else:
+            attempts[job.index] = 1
+            again.append(job)
+
+    def _kill_stuck(self, running: dict[cf.Future, tuple[Job, float]]) -> bool:
+        """Kills the local pool's workers when a job is far past its timeout; True if it did."""
+        if self.timeout <= 0 or not running:
+            return False
+        if all(time.monotonic() - started < self._hard_limit for _, started in running.values()):
+            return False
+        # ProcessPoolExecutor has no public way to stop a worker that ignores signals (C code stuck).
+        for process in getattr(self.executor, "_processes", {}).values():
+            process.kill()
+        return True
+
+
+def _note_retry(evaluation: Evaluation, attempts: int) -> Evaluation:
+    if attempts and not evaluation.ok:
+        return replace(evaluation, message=f"{evaluation.message} (also on its retry)")
+    return evaluation
