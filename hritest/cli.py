@@ -307,3 +307,7 @@ def _print_summary(found) -> None:  # noqa: ANN001 - hritest.search.Search
         table.add_row(name, value)
     out.print(table)
 
+
+
+if __name__ == "__main__":
+    app()

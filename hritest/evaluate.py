@@ -120,12 +120,13 @@ def _score(domain: Domain, scenario: Scenario, rollout: Rollout, base: dict) -> 
 
 
 def _blame(domain: Domain, exc: BaseException) -> str:
-    """A message naming the plugin whose code raised, with the traceback."""
-    modules = {cls.__module__: (kind, cls) for kind, cls in
+    """A message naming the plugin whose method was running deepest, with the traceback."""
+    plugins = {(cls.__module__, cls.__qualname__): (kind, cls) for kind, cls in
                (("task", domain.task_cls), ("robot", domain.robot_cls), ("human", domain.human_cls))}
     culprit = None
     for frame, _ in traceback.walk_tb(exc.__traceback__):
-        culprit = modules.get(frame.f_globals.get("__name__"), culprit)
+        owner = frame.f_code.co_qualname.rsplit(".", 1)[0]
+        culprit = plugins.get((frame.f_globals.get("__name__"), owner), culprit)
     where = f"{culprit[0]} plugin {culprit[1].__qualname__}" if culprit else "the simulation"
     trace = "".join(traceback.format_exception(exc)).rstrip()
     return f"{where} raised {type(exc).__name__}: {exc}\n{trace}"

@@ -45,8 +45,11 @@ class Job:
     seed: int
 
 
-class EvaluationTimeout(Exception):
-    """Raised inside a worker when an evaluation runs past its time limit."""
+class EvaluationTimeout(BaseException):
+    """Raised inside a worker when an evaluation runs past its time limit.
+
+    A BaseException, so that a plugin's ``except Exception`` (or evaluate's own) cannot swallow it.
+    """
 
 
 @cache

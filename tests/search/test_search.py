@@ -1,0 +1,149 @@
+"""Searches end to end on the analytic toy domain: real pyribs, real process pools, real files."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from hritest import search as qd
+from hritest.cli import app
+from hritest.rundir import RunDirectory
+
+runner = CliRunner()
+TWO = qd.Backend(workers=2, timeout=20)
+
+
+def elites(run: Path) -> list[dict]:
+    return (run / "archive.csv").read_text().splitlines()
+
+
+@pytest.mark.parametrize("algorithm", ["random", "map_elites", "cma_mae"])
+def test_each_algorithm_fills_both_archives_and_the_run_directory(toy_spec, tmp_path, algorithm):
+    found = qd.start(spec_file=toy_spec(), out=tmp_path / "run", algorithm=algorithm, budget=250, seed=3,
+                     backend=TWO)
+    run = tmp_path / "run"
+    for name in ("spec.yaml", "run.json", "evaluations.jsonl", "occupancy.f32", "checkpoint.pkl",
+                 "progress.csv", "archive.csv", "failures.yaml"):
+        assert (run / name).is_file(), name
+    records = RunDirectory.open(run).evaluations()
+    assert sorted(r["index"] for r in records) == list(range(250))  # exactly the budget, none twice
+    assert all(r["status"] == "ok" for r in records)
+    assert found.state["result"].stats.num_elites > 1
+    # The result archive holds raw objectives; the regularised ones only differ by the repair cost.
+    for r in records:
+        assert r["search_objective"] == pytest.approx(r["objective"] - r["repair_cost"])
+    failures = yaml.safe_load((run / "failures.yaml").read_text())["failures"]
+    assert all(f["objective"] >= 8 for f in failures)
+    assert len(failures) == sum(r["failure"] for r in records if r["index"] in
+                                {int(i) for i in found.state["result"].data("evaluation")})
+
+
+def test_same_spec_and_seed_give_the_same_result_archive(toy_spec, tmp_path):
+    spec = toy_spec()
+    a = qd.start(spec_file=spec, out=tmp_path / "a", budget=400, seed=7, backend=TWO)
+    b = qd.start(spec_file=spec, out=tmp_path / "b", budget=400, seed=7, backend=qd.Backend(workers=1))
+    c = qd.start(spec_file=spec, out=tmp_path / "c", budget=400, seed=8, backend=TWO)
+    assert elites(tmp_path / "a") == elites(tmp_path / "b")
+    assert elites(tmp_path / "a") != elites(tmp_path / "c")
+    assert a.state["result"].stats.qd_score == b.state["result"].stats.qd_score
+
+
+@pytest.mark.parametrize(("fault", "status"), [("raise", "plugin_error"), ("nan", "nan"), ("exit", "crashed"),
+                                               ("hang", "timeout")])
+def test_a_misbehaving_plugin_fails_its_scenarios_only(toy_spec, tmp_path, fault, status):
+    spec = toy_spec("time_limit: 10.0\n", f"time_limit: 10.0\n  params: {{fault: {fault}, fault_above: 0.045}}\n")
+    found = qd.start(spec_file=spec, out=tmp_path / "run", algorithm="random", budget=60, seed=1,
+                     backend=qd.Backend(workers=2, timeout=1.0))
+    records = RunDirectory.open(tmp_path / "run").evaluations()
+    assert sorted(r["index"] for r in records) == list(range(60))
+    bad = [r for r in records if r["theta"][4] > 0.045]
+    good = [r for r in records if r["theta"][4] <= 0.045]
+    assert bad and good
+    assert {r["status"] for r in bad} == {status}
+    assert all(r["status"] == "ok" for r in good)  # neighbours of a crash are not blamed
+    assert all("retry" in r["message"] for r in bad)
+    if fault == "raise":
+        assert "task plugin ToyTask raised RuntimeError: toy plugin exploded" in bad[0]["message"]
+    elites_ = {int(i) for i in found.state["result"].data("evaluation")}
+    assert elites_.isdisjoint(r["index"] for r in bad)
+
+
+def test_a_killed_run_resumes_to_the_same_state(toy_spec, tmp_path):
+    spec = toy_spec("time_limit: 10.0\n", "time_limit: 10.0\n  params: {delay: 0.01}\n")
+    qd.start(spec_file=spec, out=tmp_path / "whole", budget=700, seed=5, backend=TWO)
+
+    killed = tmp_path / "killed"
+    command = [sys.executable, "-m", "hritest.cli", "search", str(spec), "--budget", "700", "--seed", "5",
+               "--workers", "2", "--quiet", "--out", str(killed)]
+    process = subprocess.Popen(command, start_new_session=True, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL)
+    lines = killed / "evaluations.jsonl"
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:  # kill it in the middle of its second batch
+        if lines.exists() and len(lines.read_text().splitlines()) > 350:
+            break
+        time.sleep(0.05)
+    os.killpg(process.pid, signal.SIGKILL)
+    process.wait()
+    before = RunDirectory.open(killed).evaluations()
+    assert 350 < len(before) < 700
+
+    result = runner.invoke(app, ["search", "--resume", str(killed), "--workers", "2", "--quiet"])
+    assert result.exit_code in (0, 1), result.output
+    after = RunDirectory.open(killed).evaluations()
+    assert sorted(r["index"] for r in after) == list(range(700))
+    done_before = {r["index"]: r for r in before}
+    redone = [r for r in after if r["index"] in done_before and r != done_before[r["index"]]]
+    assert not redone  # nothing finished before the kill was evaluated again
+    assert elites(killed) == elites(tmp_path / "whole")
+    progress = np.loadtxt(killed / "progress.csv", delimiter=",", skiprows=1, usecols=0)
+    assert progress[-1] == 700
+
+
+def test_resume_refuses_bad_run_directories(toy_spec, tmp_path):
+    spec = toy_spec()
+    assert runner.invoke(app, ["search", "--resume", str(tmp_path / "nothing")]).exit_code == 2
+    (tmp_path / "empty").mkdir()
+    result = runner.invoke(app, ["search", "--resume", str(tmp_path / "empty")])
+    assert result.exit_code == 2 and "not a hritest run directory" in result.output
+
+    qd.start(spec_file=spec, out=tmp_path / "run", budget=20, seed=0, algorithm="random", backend=TWO)
+    (tmp_path / "run" / "checkpoint.pkl").write_bytes(b"garbage")
+    result = runner.invoke(app, ["search", "--resume", str(tmp_path / "run")])
+    assert result.exit_code == 2 and "corrupt" in result.output
+
+    qd.start(spec_file=spec, out=tmp_path / "run2", budget=20, seed=0, algorithm="random", backend=TWO)
+    spec.write_text(spec.read_text().replace("budget: 500", "budget: 501"))
+    before = (tmp_path / "run2" / "evaluations.jsonl").read_text()
+    result = runner.invoke(app, ["search", "--resume", str(tmp_path / "run2")])
+    assert result.exit_code == 2 and "changed since this run started" in result.output
+    assert (tmp_path / "run2" / "evaluations.jsonl").read_text() == before  # nothing written
+
+
+def test_bad_arguments_exit_2_and_write_nothing(toy_spec, tmp_path):
+    spec = toy_spec()
+    for args in (["--workers", "0"], ["--algorithm", "nope"], ["--budget", "0"]):
+        result = runner.invoke(app, ["search", str(spec), "--out", str(tmp_path / "run"), *args])
+        assert result.exit_code == 2, (args, result.output)
+        assert not (tmp_path / "run").exists()
+    result = runner.invoke(app, ["search", str(spec), "--cluster", "tcp://127.0.0.1:1", "--out",
+                                 str(tmp_path / "run")])
+    assert result.exit_code == 2 and ("Dask" in result.output or "cannot reach" in result.output)
+    assert not (tmp_path / "run").exists()
+
+
+def test_run_json_records_what_is_needed_to_reproduce(toy_spec, tmp_path):
+    qd.start(spec_file=toy_spec(), out=tmp_path / "run", budget=10, seed=2, algorithm="random", backend=TWO)
+    meta = json.loads((tmp_path / "run" / "run.json").read_text())
+    assert meta["seed"] == 2 and meta["algorithm"] == "random" and meta["budget"] == 10
+    assert {"hritest", "mujoco", "ribs", "numpy"} <= set(meta["versions"])
