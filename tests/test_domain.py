@@ -28,7 +28,7 @@ def test_bind_moves_objects_and_sets_model_parameters(domain):
     np.testing.assert_allclose(scenario.objects["goal1"], [0.66, -0.02, 0.96])
     np.testing.assert_allclose(scenario.human["noise"], [0.01, -0.02, 0.03])
     assert scenario.human["speed"] == 1.0  # unbound: the plugin's default
-    assert scenario.task == {"scale": 1.0}
+    assert scenario.task["scale"] == 1.0 and scenario.task["fault"] == "none"
     assert scenario.values["g1y"] == -0.02
     # Binding does not alias theta or the nominal positions.
     theta[0] = 0.0

@@ -1,0 +1,27 @@
+"""The simulation core: a kinematic MuJoCo arm driven by world-frame twists, and its scene."""
+
+from hritest.sim.control import twist_to_joint_velocity
+from hritest.sim.world import (
+    DT,
+    HAND_RADIUS,
+    ROBOT_BASE,
+    START_CONFIG,
+    ArmModelError,
+    Box,
+    TwistStep,
+    World,
+    WorldLayout,
+)
+
+__all__ = [
+    "DT",
+    "HAND_RADIUS",
+    "ROBOT_BASE",
+    "START_CONFIG",
+    "ArmModelError",
+    "Box",
+    "TwistStep",
+    "World",
+    "WorldLayout",
+    "twist_to_joint_velocity",
+]

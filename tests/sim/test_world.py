@@ -1,0 +1,272 @@
+"""The MuJoCo world: the arm's kinematics, reach, limits, collisions and determinism."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from hritest.errors import HritestError
+from hritest.sim import DT, START_CONFIG, ArmModelError, Box, World, WorldLayout
+
+R_GOAL = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+R_GOAL_TURNED = np.diag([-1.0, -1.0, 1.0]) @ R_GOAL  # the second target: 180 deg about world z
+BASE = np.array([0.409, 0.338, 0.795])
+WORKSPACES = {"ws1": ((0.52, 0.68), (-0.08, 0.18)), "ws2": ((0.138, 0.298), (0.496, 0.756))}
+START_EE = np.array([0.41, 0.05, 0.96])
+PERSISTING = 40  # ticks (1 s) of limit_reached in a row: the arm is stuck, not passing by
+
+
+def reference_layout(**changes) -> WorldLayout:
+    """The reference's scene: side table, the two workspace slabs, two goal boxes, a hand."""
+    fields = dict(
+        table=Box(name="table", center=(0.65, -0.175, 0.845), half_size=(0.2, 0.5, 0.021)),
+        regions=(
+            Box(name="ws1", center=(0.595, 0.05, 0.86), half_size=(0.13, 0.18, 0.021)),
+            Box(name="ws2", center=(0.22, 0.625, 0.86), half_size=(0.13, 0.18, 0.021)),
+        ),
+        objects=(
+            Box(name="goal0", center=(0.6, 0.05, 0.96), half_size=(0.032,) * 3),
+            Box(name="goal1", center=(0.218, 0.626, 0.96), half_size=(0.032,) * 3),
+        ),
+        hand_start=(0.91, 0.05, 0.96),
+    )
+    return WorldLayout(**(fields | changes))
+
+
+@pytest.fixture(scope="module")
+def world() -> World:
+    return World(layout=reference_layout())
+
+
+@pytest.fixture
+def fresh(world: World) -> World:
+    world.reset()
+    return world
+
+
+def rotation_error(current: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """World-frame rotation vector taking ``current`` to ``target``."""
+    return Rotation.from_matrix(target @ current.T).as_rotvec()
+
+
+def test_start_pose_is_where_the_operator_starts(fresh: World):
+    # Documented in hritest.sim.arm: within 1 mm of (0.41, 0.05, 0.96) and 0.1 deg of R_goal.
+    pose = fresh.ee_pose()
+    assert np.linalg.norm(pose[:3, 3] - START_EE) < 1e-3
+    assert np.linalg.norm(rotation_error(pose[:3, :3], R_GOAL)) < np.radians(0.1)
+    np.testing.assert_array_equal(fresh.q, START_CONFIG)
+    assert not fresh.self_collision()
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_jacobian_matches_finite_differences(world: World, seed: int):
+    rng = np.random.default_rng(seed)
+    q0 = np.array(START_CONFIG) + (rng.uniform(-0.5, 0.5, 6) if seed else 0.0)
+    world.set_q(q0)
+    jacobian, h = world.jacobian(), 1e-6
+    numeric = np.empty((6, 6))
+    for i in range(6):
+        step = np.eye(6)[i] * h
+        world.set_q(q0 + step)
+        plus = world.ee_pose()
+        world.set_q(q0 - step)
+        minus = world.ee_pose()
+        numeric[:3, i] = (plus[:3, 3] - minus[:3, 3]) / (2 * h)
+        numeric[3:, i] = rotation_error(minus[:3, :3], plus[:3, :3]) / (2 * h)
+    np.testing.assert_allclose(jacobian, numeric, atol=1e-5)
+
+
+@pytest.mark.parametrize("direction", [(1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (1, 1, 0)])
+def test_constant_twist_moves_the_ee_along_a_straight_line(fresh: World, direction):
+    line = np.array(direction, dtype=float) / np.linalg.norm(direction)
+    start = fresh.ee_pose()
+    for _ in range(int(2.0 / DT)):
+        assert not fresh.step_twist(np.r_[0.05 * line, 0, 0, 0]).limit_reached
+    end = fresh.ee_pose()
+    moved = end[:3, 3] - start[:3, 3]
+    assert moved @ line == pytest.approx(0.1, abs=1e-3)
+    assert np.linalg.norm(moved - (moved @ line) * line) < 1e-3
+    assert np.linalg.norm(rotation_error(start[:3, :3], end[:3, :3])) < np.radians(0.5)
+
+
+def _rotation_command(pose: np.ndarray, target: np.ndarray, goal: np.ndarray) -> np.ndarray:
+    # Near a half turn the direction of the rotation error is decided by rounding; turn the hand
+    # the way the arm swings about its base, so wrist and base do not fight each other.
+    error = rotation_error(pose[:3, :3], target)
+    angle = np.linalg.norm(error)
+    if angle > np.pi - 0.2:
+        swing = np.cross(pose[:3, 3] - BASE, goal - BASE)[2]
+        if error[2] * swing < 0:
+            error = -error * (2 * np.pi - angle) / angle
+    return error
+
+
+def _clip(vector: np.ndarray, largest: float) -> np.ndarray:
+    norm = np.linalg.norm(vector)
+    return vector * min(1.0, largest / norm) if norm > 0 else vector
+
+
+def _drive_to(world: World, goal: np.ndarray, target: np.ndarray) -> tuple[bool, int]:
+    """Proportional twist control (gain 2/s, capped at 0.25 m/s and 1 rad/s) for at most 20 s.
+
+    Returns whether the pose was reached (1 cm, pi/48) and the longest run of limit_reached ticks.
+    """
+    world.reset()
+    run = longest = 0
+    for _ in range(int(20.0 / DT)):
+        pose = world.ee_pose()
+        error = goal - pose[:3, 3]
+        turn = _rotation_command(pose, target, goal)
+        if np.linalg.norm(error) < 0.01 and np.linalg.norm(turn) < np.pi / 48:
+            return True, longest
+        step = world.step_twist(np.r_[_clip(2 * error, 0.25), _clip(2 * turn, 1.0)])
+        run = run + 1 if step.limit_reached else 0
+        longest = max(longest, run)
+    return False, longest
+
+
+def _workspace_points() -> list:
+    points = []
+    for name, (xs, ys) in WORKSPACES.items():
+        corners = [(x, y) for x in xs for y in ys]
+        for x, y in [*corners, (np.mean(xs), np.mean(ys))]:
+            points.append(pytest.param(np.array([x, y, 0.96]), id=f"{name}-{x:.3f}-{y:.3f}"))
+    return points
+
+
+@pytest.mark.parametrize("goal", _workspace_points())
+def test_every_workspace_corner_and_centre_is_reachable_from_the_start(world: World, goal):
+    outcomes = []
+    for target in (R_GOAL, R_GOAL_TURNED):
+        reached, longest = _drive_to(world, goal, target)
+        outcomes.append((reached, longest))
+        if reached and longest < PERSISTING:
+            return
+    pytest.fail(f"neither target orientation reached: (reached, longest limit run) = {outcomes}")
+
+
+def test_velocity_and_joint_limits_hold_under_random_twists(fresh: World):
+    rng = np.random.default_rng(7)
+    lower, upper = fresh.joint_limits
+    speeds = fresh.velocity_limits
+    for _ in range(2000):
+        step = fresh.step_twist(rng.normal(0.0, [0.3, 0.3, 0.3, 1.0, 1.0, 1.0]))
+        assert np.all(np.abs(step.qdot) <= 0.95 * speeds + 1e-12)
+        assert np.all(fresh.q >= lower - 1e-8) and np.all(fresh.q <= upper + 1e-8)
+
+
+def test_driving_joint_2_into_its_limit_reports_it(fresh: World):
+    # Straight down from the start, the shoulder (joint 2) tilts until its upper limit stops it.
+    upper = fresh.joint_limits[1][1]
+    flagged = []
+    for _ in range(300):
+        flagged.append(fresh.step_twist([0.0, 0.0, -0.1, 0.0, 0.0, 0.0]).limit_reached)
+        assert fresh.q[1] <= upper + 1e-8
+    assert any(flagged)
+    assert upper - fresh.q[1] < 0.03 and flagged[-1]
+
+
+def test_limits_are_the_references(world: World):
+    lower, upper = world.joint_limits
+    np.testing.assert_array_equal(lower, [-np.inf, -3.845, -4.104, -np.inf, -np.inf, -np.inf])
+    np.testing.assert_array_equal(upper, [np.inf, 0.704, 0.958, np.inf, np.inf, np.inf])
+    assert np.all((world.velocity_limits > 0.83) & (world.velocity_limits < 0.84))
+
+
+@pytest.mark.parametrize(
+    "q",
+    [
+        pytest.param((-2.38, 0.0, -0.28, -0.75, 0.0, 3.55), id="hand-into-table"),
+        pytest.param((-2.38, 0.704, -0.28, -0.75, 0.0, 3.55), id="arm-onto-pedestal"),
+        pytest.param((-2.38, -0.43, -4.05, 3.14, -1.57, 3.55), id="hand-into-upper-arm"),
+    ],
+)
+def test_folded_configurations_collide(world: World, q):
+    world.set_q(q)
+    assert world.self_collision()
+
+
+def test_goal_boxes_and_hand_never_collide_with_the_arm():
+    at_ee = tuple(START_EE)
+    world = World(
+        layout=reference_layout(
+            objects=(Box(name="goal", center=at_ee, half_size=(0.032,) * 3),), hand_start=at_ee
+        )
+    )
+    assert not world.self_collision()
+
+
+def test_same_twists_give_bit_identical_joints(world: World):
+    twists = np.random.default_rng(3).normal(0.0, 0.1, (400, 6))
+
+    def run(w: World) -> np.ndarray:
+        w.reset()
+        for twist in twists:
+            w.step_twist(twist)
+        return w.q
+
+    first = run(world)
+    np.testing.assert_array_equal(first, run(world))
+    np.testing.assert_array_equal(first, run(World(layout=reference_layout())))
+
+
+def test_reset_restores_the_start_and_the_hand(world: World):
+    world.step_twist([0.05, 0.0, 0.0, 0.0, 0.0, 0.0])
+    world.set_hand([0.7, 0.2, 0.96])
+    np.testing.assert_array_equal(world.hand_position(), [0.7, 0.2, 0.96])
+    world.reset()
+    np.testing.assert_array_equal(world.q, START_CONFIG)
+    np.testing.assert_array_equal(world.hand_position(), [0.91, 0.05, 0.96])
+
+
+def test_link_poses_name_every_arm_body(fresh: World):
+    poses = fresh.link_poses()
+    assert list(poses) == ["pedestal", *(f"link{i}" for i in range(1, 7))]
+    np.testing.assert_allclose(poses["pedestal"][:3, 3], BASE)
+    np.testing.assert_allclose(poses["link1"][:3, 3], BASE + [0, 0, 0.1], atol=1e-12)
+    assert all(pose.shape == (4, 4) for pose in poses.values())
+
+
+def test_a_world_without_a_hand_says_so():
+    world = World(layout=reference_layout(hand_start=None))
+    with pytest.raises(HritestError, match="no hand"):
+        world.hand_position()
+
+
+ONE_LINK_ARM = """<mujoco><compiler angle="radian"/><worldbody>
+  <body name="upper"><joint name="swing" axis="0 0 1"/>
+    <geom type="capsule" fromto="0 0 0.05 0.3 0 0.05" size="0.02"/>
+    <body name="lower" pos="0.3 0 0.05"><joint name="bend" axis="0 1 0" range="-1 1"/>
+      <geom type="capsule" fromto="0 0 0 0.2 0 0" size="0.02"/><site name="tip" pos="0.2 0 0"/>
+    </body></body></worldbody>
+  {custom}</mujoco>"""
+VELOCITIES = '<custom><numeric name="velocity_limits" data="1 1"/></custom>'
+
+
+def test_a_users_arm_file_drives_the_world(tmp_path):
+    path = tmp_path / "arm.xml"
+    path.write_text(ONE_LINK_ARM.format(custom=VELOCITIES))
+    world = World(layout=reference_layout(arm_mjcf=str(path), ee_site="tip", start_config=(0, 0)))
+    assert world.joint_names == ("swing", "bend")
+    np.testing.assert_allclose(world.ee_pose()[:3, 3], BASE + [0.5, 0, 0.05])
+    assert world.jacobian().shape == (6, 2)
+    np.testing.assert_array_equal(world.joint_limits[0], [-np.inf, -1.0])
+    step = world.step_twist([0.0, 0.05, 0.0, 0.0, 0.0, 0.0])
+    assert step.qdot[0] > 0  # a 2-joint arm resolves the twist in the least-squares sense
+
+
+@pytest.mark.parametrize(
+    ("custom", "site", "message"),
+    [("", "tip", "velocity_limits"), (VELOCITIES, "ee", "no site named 'ee'")],
+)
+def test_an_unusable_arm_file_is_explained(tmp_path, custom, site, message):
+    path = tmp_path / "arm.xml"
+    path.write_text(ONE_LINK_ARM.format(custom=custom))
+    with pytest.raises(ArmModelError, match=message):
+        World(layout=reference_layout(arm_mjcf=str(path), ee_site=site, start_config=(0, 0)))
+
+
+def test_box_checks_its_sizes():
+    with pytest.raises(ValueError, match="half_size needs 3 numbers"):
+        Box(name="bad", center=(0, 0, 0), half_size=(1, 1))
