@@ -217,7 +217,7 @@ def search(
                                                 show_default=False)] = None,
     resume: Annotated[Path | None, typer.Option(help="continue the killed run in this run directory",
                                                 rich_help_panel="Run")] = None,
-    algorithm: Annotated[str | None, typer.Option(help="random, map_elites, cma_mae (default: the spec's)",
+    algorithm: Annotated[str | None, typer.Option(help="random, map_elites, cma_mae, sas, dsas (default: the spec's)",
                                                   rich_help_panel="Search")] = None,
     budget: Annotated[int | None, typer.Option(min=1, help="real evaluations (default: the spec's)",
                                                rich_help_panel="Search")] = None,
@@ -230,6 +230,11 @@ def search(
                                                 rich_help_panel="Run")] = None,
     timeout: Annotated[float, typer.Option(help="seconds one scenario may take before it is stopped",
                                            rich_help_panel="Run")] = 300.0,
+    inner_iterations: Annotated[int | None, typer.Option(min=1, help="SAS/DSAS inner-loop iterations per outer "
+                                                         "iteration (default: the spec's)",
+                                                         rich_help_panel="Surrogate")] = None,
+    device: Annotated[str, typer.Option(help="where the surrogate runs: auto, cpu or cuda",
+                                        rich_help_panel="Surrogate")] = "auto",
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress bar (for CI)")] = False,
 ) -> None:
     """Search for diverse failures; writes a run directory. Exit 1 if failures were found."""
@@ -239,13 +244,16 @@ def search(
         raise typer.BadParameter("give a SPEC to start a search, or --resume RUN to continue one (not both)")
     if workers < 1:
         raise typer.BadParameter(f"must be at least 1, got {workers}", param_hint="--workers")
+    if device not in ("auto", "cpu", "cuda"):
+        raise typer.BadParameter(f"must be auto, cpu or cuda, not {device!r}", param_hint="--device")
     backend = qd.Backend(workers=workers, cluster=cluster, timeout=timeout)
     with _progress(quiet) as progress:
         if resume is not None:
             found = qd.resume(run_path=resume, backend=backend, progress=progress)
         else:
             found = qd.start(spec_file=spec, out=out, algorithm=algorithm, budget=budget, seed=seed,
-                             backend=backend, progress=progress)
+                             backend=backend, progress=progress,
+                             surrogate=qd.SurrogateOptions(inner_iterations=inner_iterations, device=device))
     _print_summary(found)
     if found.failures():
         raise typer.Exit(EXIT_FINDING)
@@ -307,6 +315,104 @@ def _print_summary(found) -> None:  # noqa: ANN001 - hritest.search.Search
         table.add_row(name, value)
     out.print(table)
 
+
+
+@command
+def report(
+    runs: Annotated[list[Path], typer.Argument(help="a run directory, or several to compare", show_default=False)],
+    out_dir: Annotated[Path | None, typer.Option("--out", help="report folder (default: RUN/report, or "
+                                                 "report-compare/ when comparing runs)", show_default=False)] = None,
+    recordings: Annotated[int, typer.Option(min=0, help="record the N worst failures, plus the most different "
+                                            "ones, for Rerun (0: none)")] = 10,
+) -> None:
+    """Write a run's failure report (report/index.html and summary.md) and its failures' Rerun recordings.
+
+    With several runs, write one page that compares them (no recordings).
+    """
+    from hritest.report import compare_runs, write_report
+
+    if len(runs) == 1:
+        page = write_report(runs[0], recordings=recordings, out=out_dir)
+        folder = runs[0] / "recordings"
+        if folder.is_dir() and recordings:
+            out.print(f"recordings: {folder}", highlight=False)
+    else:
+        page = compare_runs(runs, out_dir if out_dir is not None else Path("report-compare"))
+    out.print(f"report: {page}", highlight=False)
+
+
+@command
+def replay(
+    target: Annotated[Path, typer.Argument(help="a run directory (with --failure) or a spec (with --theta)",
+                                           show_default=False)],
+    failure: Annotated[int | None, typer.Option(help="the failure's id in the run (see its report or "
+                                                "failures.yaml)", show_default=False)] = None,
+    theta: Annotated[str | None, typer.Option(help="comma-separated theta, with a SPEC", show_default=False)] = None,
+    seed: Annotated[int, typer.Option(help="the evaluation seed, with a SPEC")] = 0,
+    out_path: Annotated[Path | None, typer.Option("--out", help="where to write the recording (default: "
+                                                  "RUN/recordings/ID.rrd, or recordings/SPEC-DIGEST.rrd)",
+                                                  show_default=False)] = None,
+    open_: Annotated[bool, typer.Option("--open", help="open the recording in the Rerun viewer")] = False,
+    tolerance: Annotated[float, typer.Option(min=0.0, help="absolute tolerance on the objective and measures")]
+    = 1e-6,
+) -> None:
+    """Re-simulate a failure (or any scenario), check it reproduces, and write its Rerun recording.
+
+    Exit 0 when the outcome matches the stored one (for a SPEC: a second simulation), 1 when not.
+    """
+    from hritest import recording
+    from hritest import replay as rp
+    from hritest.errors import HritestError as Bad
+    from hritest.rundir import RunDirectory, digest
+
+    if not target.exists():
+        raise Bad(f"{target} does not exist; give a run directory (with --failure) or a spec (with --theta)")
+    if target.is_dir():
+        if failure is None or theta is not None:
+            raise typer.BadParameter("with a run directory give --failure ID (and no --theta)",
+                                     param_hint="--failure")
+        run = RunDirectory.open(target)
+        record = rp.stored_failure(run, failure)  # bad input fails before anything is written
+        path = recording.check_writable(out_path or run.path / "recordings" / f"{failure}.rrd")
+        result = rp.replay_record(rp.run_domain(run), record, spec_digest=run.meta["spec_digest"],
+                                  tolerance=tolerance)
+        title = f"{result.domain.spec.name}: failure {failure} ({run.path.resolve().name})"
+    else:
+        if theta is None or failure is not None:
+            raise typer.BadParameter("with a spec give --theta v1,v2,... (and no --failure)", param_hint="--theta")
+        domain, values = _domain_and_theta(target, theta)
+        if out_path is not None:
+            recording.check_writable(out_path)
+        result = rp.replay_theta(domain, values, seed=seed, spec_digest=digest(target), tolerance=tolerance)
+        path = recording.check_writable(out_path or Path("recordings") /
+                                        f"{domain.spec.name}-{result.digest[:12]}.rrd")
+        title = f"{domain.spec.name}: seed {seed}"
+    recording.write_recording(path, domain=result.domain, evaluation=result.evaluation, rollout=result.rollout,
+                              recording_id=result.digest, title=title)
+    _print_replay(result)
+    out.print(f"recording: {path}", highlight=False)
+    if open_:
+        recording.open_viewer(path)
+    if not result.matches:
+        raise typer.Exit(EXIT_FINDING)
+
+
+def _print_replay(result) -> None:  # noqa: ANN001 - hritest.replay.Replay
+    table = Table(title=f"replay against {result.against}", title_justify="left")
+    for column in ("compared", result.reference, "replayed", ""):
+        table.add_column(column, justify="right" if column in (result.reference, "replayed") else "left")
+
+    def show(value) -> str:  # noqa: ANN001
+        return f"{value:.10g}" if isinstance(value, float) else str(value)
+
+    for check in result.checks:
+        verdict = "[green]match[/green]" if check.ok else "[red]DIFFERS[/red]"
+        table.add_row(check.name, show(check.stored), show(check.replayed), verdict)
+    out.print(table)
+    out.print(f"compared: status and failure verdict exactly; objective and measures within "
+              f"{result.tolerance:g} absolute", highlight=False)
+    verdict = "[green]replay matches[/green]" if result.matches else "[red]replay does NOT match[/red]"
+    out.print(f"{verdict} (scenario digest {result.digest[:16]})")
 
 
 if __name__ == "__main__":

@@ -33,6 +33,25 @@ class RepairOutcome:
         return self.status in ("ok", "unchanged", "repaired")
 
 
+@dataclass(frozen=True, kw_only=True)
+class PenaltyTerms:
+    """What a smooth stand-in for the repair cost needs: bounds, clip groups, region boxes.
+
+    The surrogate's inner loop cannot call the mixed-integer program hundreds of thousands of
+    times, so it penalises theta by (a) the clip cost of the ``bounds`` constraint and (b) each
+    placed object's squared distance to its nearest allowed region (overlaps ignored), the
+    reference's inner-loop regulariser. ``columns[i]`` are theta's columns of object i's x and y
+    (-1: not searched); ``boxes[i, r]`` is region r's ``[[xlo, xhi], [ylo, yhi]]``, NaN where
+    object i may not go.
+    """
+
+    lower: np.ndarray
+    upper: np.ndarray
+    clip_groups: list[list[int]] | None
+    columns: np.ndarray
+    boxes: np.ndarray
+
+
 class ScenarioRepair:
     """Repairs theta so that every constraint of the spec holds, at minimum cost.
 
@@ -53,6 +72,16 @@ class ScenarioRepair:
     def objects(self) -> tuple[str, ...]:
         """The objects the program places (in order); empty when there is no program."""
         return self._problem.object_names if self._problem else ()
+
+    def penalty_terms(self) -> PenaltyTerms:
+        columns = self._columns if self._problem else np.zeros((0, 2), dtype=int)
+        regions = self._problem.regions if self._problem else ()
+        boxes = np.full((len(columns), len(regions), 2, 2), np.nan)
+        for i, allowed in enumerate(self._problem.allowed_regions if self._problem else ()):
+            for r in allowed:
+                boxes[i, r] = (regions[r].x, regions[r].y)
+        return PenaltyTerms(lower=self._lower, upper=self._upper, clip_groups=self._clip_groups,
+                            columns=columns, boxes=boxes)
 
     def check_feasible(self) -> None:
         """Raises :class:`repair.InfeasibleConstraints` if no scenario satisfies the constraints."""

@@ -16,9 +16,10 @@ from hritest.errors import HritestError
 from hritest.rundir import RunDirectory, RunDirectoryError, digest
 from hritest.search.executor import DomainRef, Evaluator, local_pool
 from hritest.search.loop import ALGORITHMS, Search, Snapshot
+from hritest.search.proposers import SurrogateOptions
 from hritest.spec import load_spec
 
-__all__ = ["ALGORITHMS", "Backend", "Search", "Snapshot", "resume", "start"]
+__all__ = ["ALGORITHMS", "Backend", "Search", "Snapshot", "SurrogateOptions", "resume", "start"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -54,6 +55,7 @@ def _dask_client(address: str):  # noqa: ANN202 - distributed.Client
 
 def start(*, spec_file: Path, out: Path | None, root: Path = Path("runs"), algorithm: str | None = None,
           budget: int | None = None, seed: int | None = None, backend: Backend = Backend(),
+          surrogate: SurrogateOptions = SurrogateOptions(),
           progress: Callable[[Snapshot], None] = lambda s: None) -> Search:
     """Runs a new search of the spec at ``spec_file``; arguments given override the spec's ``search``."""
     spec = load_spec(spec_file)
@@ -61,7 +63,7 @@ def start(*, spec_file: Path, out: Path | None, root: Path = Path("runs"), algor
     settings = spec.search
     algorithm = algorithm or settings.algorithm
     if algorithm not in ALGORITHMS:
-        raise HritestError(f"algorithm {algorithm!r} is not available yet; choose one of {', '.join(ALGORITHMS)}")
+        raise HritestError(f"unknown algorithm {algorithm!r}; choose one of {', '.join(ALGORITHMS)}")
     budget = budget if budget is not None else settings.budget
     seed = seed if seed is not None else settings.seed
     ref = DomainRef(spec=str(Path(spec_file).resolve()), base=str(Path(spec_file).resolve().parent))
@@ -70,7 +72,8 @@ def start(*, spec_file: Path, out: Path | None, root: Path = Path("runs"), algor
         run = RunDirectory.create(root=root, spec_file=spec_file, name=spec.name, folder=out,
                                   meta={"algorithm": algorithm, "budget": budget, "seed": seed,
                                         "spec_base": ref.base})
-        search = Search.new(domain=domain, run=run, algorithm=algorithm, budget=budget, seed=seed)
+        search = Search.new(domain=domain, run=run, algorithm=algorithm, budget=budget, seed=seed,
+                            options=surrogate)
         search.run(evaluator, progress)
     finally:
         evaluator.close()

@@ -21,8 +21,10 @@ from hritest.evaluate import Evaluation
 from hritest.rundir import RunDirectory
 from hritest.search import algorithms, archives
 from hritest.search.executor import Evaluator, Job
+from hritest.search.proposers import ModelFree, SurrogateAssisted, SurrogateOptions
 
-ALGORITHMS = algorithms.MODEL_FREE
+SURROGATE = ("sas", "dsas")
+ALGORITHMS = (*algorithms.MODEL_FREE, *SURROGATE)
 
 
 @dataclass(frozen=True)
@@ -78,13 +80,19 @@ class Search:
         self.occupancy_shape = (len(domain.task_cls.agents), 32, 32)
 
     @classmethod
-    def new(cls, *, domain: Domain, run: RunDirectory, algorithm: str, budget: int, seed: int) -> Search:
-        search_archive = archives.search_archive(domain, seed=seed)
+    def new(cls, *, domain: Domain, run: RunDirectory, algorithm: str, budget: int, seed: int,
+            options: SurrogateOptions | None = None) -> Search:
+        if algorithm in SURROGATE:
+            proposer = SurrogateAssisted(domain, gradients=algorithm == "dsas", seed=seed,
+                                         options=options or SurrogateOptions())
+        else:
+            proposer = ModelFree(algorithms.scheduler(domain, algorithm, archives.search_archive(domain, seed=seed),
+                                                      seed=seed))
         state = {
             "algorithm": algorithm,
             "budget": budget,
             "seed": seed,
-            "scheduler": algorithms.scheduler(domain, algorithm, search_archive, seed=seed),
+            "proposer": proposer,
             "result": archives.result_archive(domain, seed=seed),
             "evaluations": 0,
             "batch": 0,
@@ -125,7 +133,7 @@ class Search:
         started = time.monotonic()
         state = self.state
         if state["pending"] is None:
-            solutions = state["scheduler"].ask()
+            solutions = state["proposer"].ask(self)
             state["batch"] += 1
             count = min(len(solutions), state["budget"] - state["evaluations"])
             state["pending"] = {"batch": state["batch"], "solutions": solutions, "first": state["evaluations"],
@@ -143,7 +151,9 @@ class Search:
             progress(self.snapshot(extra=len([i for i in range(first, first + count) if i in self.records])))
 
         evaluator.run(jobs, finished)
-        self._tell([self.records[first + i] for i in range(count)], pending["solutions"])
+        records = [self.records[first + i] for i in range(count)]
+        self.state["proposer"].tell(self, records, pending["solutions"])
+        self._add_to_result(records)
         state["evaluations"] += count
         state["pending"] = None
         state["elapsed"] += time.monotonic() - started
@@ -158,27 +168,30 @@ class Search:
         self.write_summaries(failures)
         progress(Snapshot(state["evaluations"], state["budget"], summary, len(failures)))
 
-    def _tell(self, records: list[dict], solutions: np.ndarray) -> None:
-        """Tells the scheduler (full batches only) and adds successes to the result archive."""
-        domain, state = self.domain, self.state
-        lo, hi = domain.spec.objective.range
-        bad = lo - (hi - lo)  # below any threshold: ranked last, never an elite
-        ok = [r["status"] == "ok" for r in records]
-        measures = np.array([r["measures"] if good else [m.range[0] for m in domain.measures]
-                             for r, good in zip(records, ok)], dtype=float).reshape(len(records), -1)
-        if len(records) == len(solutions):
-            objective = np.array([r["search_objective"] if good and r["search_objective"] is not None else bad
-                                  for r, good in zip(records, ok)])
-            regions = archives.region_measures(domain, [r["regions"] for r in records])
-            state["scheduler"].tell(np.maximum(objective, bad), np.hstack([measures, regions]))
-        if any(ok):
-            good = np.flatnonzero(ok)
-            state["result"].add(
-                np.array([records[i]["theta_repaired"] for i in good]),
-                np.array([records[i]["objective"] for i in good]),
-                measures[good],
-                evaluation=np.array([records[i]["index"] for i in good]),
+    def _add_to_result(self, records: list[dict]) -> None:
+        """Adds the successful evaluations to the result archive with their raw objective."""
+        good = [r for r in records if r["status"] == "ok"]
+        if good:
+            self.state["result"].add(
+                np.array([r["theta_repaired"] for r in good]),
+                np.array([r["objective"] for r in good]),
+                np.array([r["measures"] for r in good]),
+                evaluation=np.array([r["index"] for r in good]),
             )
+
+    def dataset(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Training data from every successful evaluation: raw theta, occupancy grids, targets.
+
+        Targets are the regularised objective over the objective's range, then the measures.
+        """
+        lo, hi = self.domain.spec.objective.range
+        order = [r["index"] for r in self.run_dir.evaluations()]
+        grids = self.run_dir.occupancy(self.occupancy_shape)[: len(order)]
+        rows = [(i, self.records[index]) for i, index in enumerate(order) if self.records[index]["status"] == "ok"]
+        theta = np.array([r["theta"] for _, r in rows], dtype=np.float32).reshape(len(rows), -1)
+        targets = np.array([[r["search_objective"] / (hi - lo), *r["measures"]] for _, r in rows],
+                           dtype=np.float32).reshape(len(rows), -1)
+        return theta, grids[[i for i, _ in rows]], targets
 
     def snapshot(self, extra: int = 0) -> Snapshot:
         return Snapshot(self.state["evaluations"] + extra, self.state["budget"], None, 0)

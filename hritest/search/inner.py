@@ -1,0 +1,109 @@
+"""The inner loop of SAS and DSAS: quality-diversity search on the surrogate, then selection.
+
+Each outer iteration builds a fresh archive and fresh emitters at x0 and runs ``iterations``
+rounds of CMA-MAE (SAS) or CMA-MAEGA (DSAS) where every batch, from all emitters at once, is
+scored by one forward pass of the surrogate (and, for DSAS, the objective and measure gradients
+of the emitters' solution points by one batched backward pass per output). The elites are then
+downsampled, one random elite per block of cells, to choose what the real simulator evaluates.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from ribs.archives import GridArchive
+from ribs.emitters import EvolutionStrategyEmitter, GradientArborescenceEmitter
+from ribs.schedulers import Scheduler
+
+from hritest.domain import Domain
+from hritest.search import algorithms, archives
+from hritest.surrogate.model import Surrogate
+from hritest.surrogate.penalty import Penalty
+
+
+class SurrogateObjective:
+    """Scores solutions on the surrogate: objective = prediction - penalty, measures = prediction
+    plus, where the spec has several regions, each object's nearest region (no gradient)."""
+
+    def __init__(self, domain: Domain, surrogate: Surrogate) -> None:
+        self.surrogate = surrogate
+        self.penalty = Penalty(domain.repair.penalty_terms(), surrogate.device)
+        self.region_axes = len(archives.workspace_objects(domain)) > 0
+
+    def _outputs(self, x: torch.Tensor) -> torch.Tensor:
+        predicted = self.surrogate(x)
+        return torch.cat([predicted[:, :1] - self.penalty(x)[:, None], predicted[:, 1:]], dim=1)
+
+    def __call__(self, solutions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        with torch.inference_mode():
+            x = torch.as_tensor(solutions, dtype=torch.float32, device=self.surrogate.device)
+            out = self._outputs(x)
+            measures = self._with_regions(x, out[:, 1:])
+            return out[:, 0].double().cpu().numpy(), measures.double().cpu().numpy()
+
+    def with_jacobian(self, solutions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Objective, measures and ``(batch, 1 + measures, dim)`` Jacobian (region rows are zero)."""
+        x = torch.as_tensor(solutions, dtype=torch.float32, device=self.surrogate.device).requires_grad_(True)
+        out = self._outputs(x)
+        # In eval mode rows do not interact, so the gradient of a column's sum is each row's gradient.
+        rows = [torch.autograd.grad(out[:, j].sum(), x, retain_graph=j < out.shape[1] - 1)[0]
+                for j in range(out.shape[1])]
+        jacobian = torch.stack(rows, dim=1).detach()
+        out = out.detach()
+        with torch.no_grad():
+            measures = self._with_regions(x, out[:, 1:])
+            if self.region_axes:
+                zeros = jacobian.new_zeros((len(x), measures.shape[1] - (out.shape[1] - 1), x.shape[1]))
+                jacobian = torch.cat([jacobian, zeros], dim=1)
+        return (out[:, 0].double().cpu().numpy(), measures.double().cpu().numpy(),
+                jacobian.double().cpu().numpy())
+
+    def _with_regions(self, x: torch.Tensor, measures: torch.Tensor) -> torch.Tensor:
+        return torch.cat([measures, self.penalty.regions(x)], dim=1) if self.region_axes else measures
+
+
+def exploit(domain: Domain, objective: SurrogateObjective, *, gradients: bool, iterations: int,
+            seed: int) -> GridArchive:
+    """Runs the inner loop from scratch and returns its archive of surrogate elites."""
+    settings = domain.spec.search.emitter
+    archive = archives.search_archive(domain, seed=seed)
+    seeds = np.random.SeedSequence(seed).generate_state(settings.emitters)
+    start = algorithms.x0(domain)
+    if gradients:
+        emitters = [GradientArborescenceEmitter(archive, x0=start, sigma0=settings.sigma0, lr=settings.gradient_lr,
+                                                ranker="imp", grad_opt="gradient_ascent", restart_rule="basic",
+                                                normalize_grad=True, batch_size=settings.batch_size, seed=int(s))
+                    for s in seeds]
+    else:
+        emitters = [EvolutionStrategyEmitter(archive, x0=start, sigma0=settings.sigma0, ranker="imp",
+                                             selection_rule="mu", restart_rule="basic",
+                                             batch_size=settings.batch_size, seed=int(s))
+                    for s in seeds]
+    scheduler = Scheduler(archive, emitters)
+    for _ in range(iterations):
+        if gradients:
+            points = scheduler.ask_dqd()
+            scheduler.tell_dqd(*objective.with_jacobian(points))
+        solutions = scheduler.ask()
+        scheduler.tell(*objective(solutions))
+    return archive
+
+
+def downsample(domain: Domain, archive: GridArchive, *, rng: np.random.Generator) -> np.ndarray:
+    """One uniformly random elite per block of the selection grid, in a random order.
+
+    The selection grid has the spec's ``downsample_cells`` per measure (default: the archive's
+    own cells, i.e. every elite) and a single cell along each region axis, as in the reference.
+    """
+    data = archive.data(["solution", "measures"])
+    if len(data["solution"]) == 0:
+        return np.zeros((0, domain.space.dim))
+    cells = domain.spec.search.surrogate.downsample_cells or list(domain.archive_dims)
+    extra = archive.measure_dim - len(domain.measures)
+    blocks = GridArchive(solution_dim=1, dims=[*cells, *([1] * extra)],
+                         ranges=list(zip(archive.lower_bounds, archive.upper_bounds)))
+    block = blocks.index_of(data["measures"])
+    order = rng.permutation(len(block))
+    _, first = np.unique(block[order], return_index=True)  # a random elite per block
+    chosen = order[first]
+    return data["solution"][rng.permutation(chosen)]

@@ -1,0 +1,131 @@
+"""What proposes the next batch of scenarios to simulate: a pyribs scheduler, or SAS / DSAS.
+
+A proposer has ``ask(search) -> solutions`` and ``tell(search, records, solutions)``; the search
+loop evaluates what it asks and hands back the records in ask order. Both kinds are pickled
+into the checkpoint whole, so a resumed run continues with the exact same state.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from hritest.domain import Domain
+from hritest.search import archives, inner
+
+if TYPE_CHECKING:
+    from hritest.search.loop import Search
+
+
+class ModelFree:
+    """Random, MAP-Elites or CMA-MAE: the scheduler proposes, every proposal is simulated."""
+
+    def __init__(self, scheduler) -> None:  # noqa: ANN001 - ribs Scheduler
+        self.scheduler = scheduler
+
+    def ask(self, search: Search) -> np.ndarray:
+        return self.scheduler.ask()
+
+    def tell(self, search: Search, records: list[dict], solutions: np.ndarray) -> None:
+        """Tells full batches (a budget-truncated last batch ends the run anyway)."""
+        if len(records) != len(solutions):
+            return
+        domain = search.domain
+        lo, hi = domain.spec.objective.range
+        bad = lo - (hi - lo)  # below any threshold: ranked last, never an elite
+        ok = [r["status"] == "ok" and r["search_objective"] is not None for r in records]
+        objective = np.array([max(r["search_objective"], bad) if good else bad for r, good in zip(records, ok)])
+        measures = np.array([r["measures"] if good else [m.range[0] for m in domain.measures]
+                             for r, good in zip(records, ok)], dtype=float).reshape(len(records), -1)
+        regions = archives.region_measures(domain, [r["regions"] for r in records])
+        self.scheduler.tell(objective, np.hstack([measures, regions]))
+
+
+@dataclass(frozen=True, kw_only=True)
+class SurrogateOptions:
+    """Overrides of the spec's surrogate settings from the command line."""
+
+    inner_iterations: int | None = None
+    device: str = "auto"
+
+
+class SurrogateAssisted:
+    """SAS (CMA-MAE inner loop) or DSAS (CMA-MAEGA inner loop), the paper's Algorithm 1.
+
+    The first ``initial_evaluations`` proposals are uniform in the bounds. After that, each ask
+    is one outer iteration: retrain the surrogate on every evaluation so far, search it from
+    scratch, and propose one random surrogate elite per block of the selection grid. Each
+    proposal's prediction is kept, so that once simulated it measures the surrogate's accuracy
+    on data it was not trained on (the paper's held-out evaluation).
+    """
+
+    def __init__(self, domain: Domain, *, gradients: bool, seed: int, options: SurrogateOptions) -> None:
+        from hritest.surrogate.model import Surrogate, pick_device
+
+        settings = domain.spec.search.surrogate
+        self.gradients, self.seed = gradients, seed
+        self.iterations = options.inner_iterations or settings.inner_iterations
+        self.initial = settings.initial_evaluations
+        self.rng = np.random.default_rng(seed)
+        self.surrogate = Surrogate(inputs=domain.space.dim, agents=len(domain.task_cls.agents),
+                                   outputs=1 + len(domain.measures), epochs=settings.epochs,
+                                   batch_size=settings.batch_size, learning_rate=settings.learning_rate,
+                                   device=pick_device(options.device), seed=seed)
+        self.outer = 0
+        self.pending_predictions: np.ndarray | None = None
+        self.held_out: list[tuple[list[float], list[float]]] = []  # (predicted, true) per evaluation
+        self.fits: list[dict] = []
+
+    def ask(self, search: Search) -> np.ndarray:
+        space = search.domain.space
+        done = search.state["evaluations"]
+        self.pending_predictions = None
+        if done < self.initial:
+            return self.rng.uniform(space.lower, space.upper, size=(self.initial - done, space.dim))
+        theta, grids, targets = search.dataset()
+        fit = self.surrogate.fit(theta, grids, targets)
+        self.outer += 1
+        self.fits.append({"outer_iteration": self.outer, "samples": fit.samples,
+                          "occupancy_loss": fit.occupancy_loss, "predictor_loss": fit.predictor_loss})
+        objective = inner.SurrogateObjective(search.domain, self.surrogate)
+        archive = inner.exploit(search.domain, objective, gradients=self.gradients, iterations=self.iterations,
+                                seed=int(self.rng.integers(2**31)))
+        proposals = inner.downsample(search.domain, archive, rng=self.rng)
+        if len(proposals) == 0:  # an empty surrogate archive: explore instead of stalling
+            proposals = self.rng.uniform(space.lower, space.upper, size=(8, space.dim))
+        self.pending_predictions = self.surrogate.predict(proposals)
+        return proposals
+
+    def tell(self, search: Search, records: list[dict], solutions: np.ndarray) -> None:
+        if self.pending_predictions is None:
+            return
+        lo, hi = search.domain.spec.objective.range
+        for record, predicted in zip(records, self.pending_predictions):
+            if record["status"] == "ok":
+                true = [record["search_objective"] / (hi - lo), *record["measures"]]
+                self.held_out.append((predicted.tolist(), true))
+        search.run_dir.write_text("surrogate.json", json.dumps(self.accuracy(search.domain), indent=2))
+
+    def accuracy(self, domain: Domain) -> dict:
+        """Held-out errors the paper's way: MAE per output, right-cell fraction, cell distance."""
+        if not self.held_out:
+            return {"held_out": 0, "fits": self.fits}
+        predicted = np.array([p for p, _ in self.held_out])
+        true = np.array([t for _, t in self.held_out])
+        lo, hi = domain.spec.objective.range
+        scale = np.array([hi - lo] + [1.0] * len(domain.measures))
+        errors = np.abs(predicted - true) * scale
+        grid = archives.result_archive(domain, seed=0)
+        predicted_cells = np.array(np.unravel_index(grid.index_of(predicted[:, 1:]), grid.dims)).T
+        true_cells = np.array(np.unravel_index(grid.index_of(true[:, 1:]), grid.dims)).T
+        return {
+            "held_out": len(true),
+            "objective_mae": float(errors[:, 0].mean()),
+            "measure_mae": {m.name: float(errors[:, i + 1].mean()) for i, m in enumerate(domain.measures)},
+            "right_cell_fraction": float(np.all(predicted_cells == true_cells, axis=1).mean()),
+            "mean_cell_distance": float(np.abs(predicted_cells - true_cells).sum(axis=1).mean()),
+            "fits": self.fits,
+        }

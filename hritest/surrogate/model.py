@@ -1,0 +1,104 @@
+"""The surrogate: trains the two networks on evaluated scenarios and predicts new ones in batches.
+
+Training follows the paper exactly: all data every outer iteration, weights (and optimiser
+state) kept between iterations, the occupancy network first (KL divergence to the observed
+grids), then the predictor for the same number of epochs with the occupancy network frozen and
+fed its *predicted* grids, so that at exploitation time it sees what it was trained on.
+Targets are the regularised objective divided by the objective's range, and the raw measures.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import nn
+
+from hritest.surrogate.networks import OccupancyNet, PredictNet
+
+
+def pick_device(name: str) -> torch.device:
+    """``auto`` is CUDA when present, else the CPU."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name == "cuda" and not torch.cuda.is_available():
+        from hritest.errors import HritestError
+
+        raise HritestError("--device cuda was asked for, but torch sees no CUDA device; use --device cpu or auto")
+    return torch.device(name)
+
+
+@dataclass(frozen=True)
+class Fit:
+    """The last epoch's mean losses of one training round."""
+
+    occupancy_loss: float
+    predictor_loss: float
+    samples: int
+
+
+class Surrogate:
+    """Occupancy network + predictor, trained together on (theta, grids, targets).
+
+    Args:
+        inputs: theta's length. agents: occupancy channels. outputs: 1 + number of measures.
+    """
+
+    def __init__(self, *, inputs: int, agents: int, outputs: int, epochs: int, batch_size: int,
+                 learning_rate: float, device: torch.device, seed: int) -> None:
+        torch.manual_seed(seed + 42)
+        self.device = device
+        self.occupancy = OccupancyNet(inputs=inputs, agents=agents).to(device)
+        self.predictor = PredictNet(inputs=inputs, agents=agents, outputs=outputs).to(device)
+        self.occupancy_optimizer = torch.optim.AdamW(self.occupancy.parameters(), lr=learning_rate)
+        self.predictor_optimizer = torch.optim.AdamW(self.predictor.parameters(), lr=learning_rate)
+        self.epochs, self.batch_size, self.seed = epochs, batch_size, seed
+        self.rounds = 0
+
+    def fit(self, theta: np.ndarray, occupancy: np.ndarray, targets: np.ndarray) -> Fit:
+        """One round of training on every sample so far (batches of ``batch_size``, last partial dropped)."""
+        generator = torch.Generator().manual_seed(self.seed + 420 + self.rounds)
+        self.rounds += 1
+        x = torch.as_tensor(theta, dtype=torch.float32, device=self.device)
+        grids = torch.as_tensor(occupancy, dtype=torch.float32, device=self.device)
+        y = torch.as_tensor(targets, dtype=torch.float32, device=self.device)
+        batch = min(self.batch_size, len(x))  # the paper's first round has 100 samples
+        kl = nn.KLDivLoss(reduction="batchmean")
+
+        self.occupancy.train()
+        occupancy_loss = self._epochs(generator, len(x), batch, self.occupancy_optimizer,
+                                      lambda i: kl(self.occupancy(x[i]), grids[i]))
+        self.occupancy.eval()
+        self.predictor.train()
+        with torch.no_grad():
+            predicted = self.occupancy(x)
+        predictor_loss = self._epochs(generator, len(x), batch, self.predictor_optimizer,
+                                      lambda i: nn.functional.mse_loss(self.predictor(x[i], predicted[i]), y[i]))
+        self.predictor.eval()
+        return Fit(occupancy_loss, predictor_loss, len(x))
+
+    def _epochs(self, generator: torch.Generator, n: int, batch: int, optimizer: torch.optim.Optimizer,
+                loss_of) -> float:  # noqa: ANN001 - index tensor -> loss
+        mean = math.nan
+        for _ in range(self.epochs):
+            order = torch.randperm(n, generator=generator).to(self.device)
+            losses = []
+            for start in range(0, n - batch + 1, batch):
+                loss = loss_of(order[start : start + batch])
+                optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                optimizer.step()
+                losses.append(loss.detach())
+            mean = float(torch.stack(losses).mean())
+        return mean
+
+    def __call__(self, theta: torch.Tensor) -> torch.Tensor:
+        """Predictions ``(batch, outputs)`` for ``theta`` (a tensor on :attr:`device`), in eval mode."""
+        return self.predictor(theta, self.occupancy(theta))
+
+    def predict(self, theta: np.ndarray) -> np.ndarray:
+        with torch.inference_mode():
+            x = torch.as_tensor(np.asarray(theta), dtype=torch.float32, device=self.device)
+            return self(x).double().cpu().numpy()

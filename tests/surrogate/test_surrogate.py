@@ -1,0 +1,135 @@
+"""The surrogate networks, their training, the batched Jacobian, and tiny SAS / DSAS runs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from hritest import search as qd
+from hritest.domain import compile_spec
+from hritest.evaluate import evaluate
+from hritest.rundir import RunDirectory
+from hritest.search.inner import SurrogateObjective, downsample, exploit
+from hritest.spec import load_spec
+from hritest.surrogate.model import Surrogate
+from hritest.surrogate.networks import OccupancyNet, PredictNet
+
+SPECS = Path(__file__).parents[2] / "specs"
+CPU = torch.device("cpu")
+
+
+def surrogate_for(domain, *, epochs=5, seed=0) -> Surrogate:
+    return Surrogate(inputs=domain.space.dim, agents=len(domain.task_cls.agents), outputs=1 + len(domain.measures),
+                     epochs=epochs, batch_size=16, learning_rate=1e-3, device=CPU, seed=seed)
+
+
+@pytest.mark.parametrize(("spec", "inputs", "agents", "outputs"),
+                         [("teleop", 9, 1, 3), ("collab", 6, 2, 3), ("collab_human", 8, 2, 3), ("collab_wait", 6, 2, 3)])
+def test_shapes_follow_the_spec(spec, inputs, agents, outputs):
+    domain = compile_spec(load_spec(SPECS / f"{spec}.yaml"))
+    assert (domain.space.dim, len(domain.task_cls.agents), 1 + len(domain.measures)) == (inputs, agents, outputs)
+    occupancy = OccupancyNet(inputs=inputs, agents=agents).eval()
+    predictor = PredictNet(inputs=inputs, agents=agents, outputs=outputs).eval()
+    grids = occupancy(torch.randn(5, inputs))
+    assert grids.shape == (5, agents, 32, 32)
+    torch.testing.assert_close(grids.exp().sum(dim=(2, 3)), torch.ones(5, agents))
+    assert predictor(torch.randn(5, inputs), grids).shape == (5, outputs)
+
+
+@pytest.fixture(scope="module")
+def teleop_data():
+    """A small real dataset: simulated teleoperation scenarios with their occupancy grids."""
+    domain = compile_spec(load_spec(SPECS / "teleop.yaml"))
+    rng = np.random.default_rng(0)
+    theta = rng.uniform(domain.space.lower, domain.space.upper, size=(48, domain.space.dim))
+    evaluations = [evaluate(domain, t, seed=i) for i, t in enumerate(theta)]
+    assert all(e.ok for e in evaluations)
+    grids = np.stack([e.occupancy for e in evaluations]).astype(np.float32)
+    targets = np.array([[e.search_objective / 10, *e.measures] for e in evaluations], dtype=np.float32)
+    return domain, theta.astype(np.float32), grids, targets
+
+
+def test_training_lowers_the_loss_on_real_data(teleop_data):
+    domain, theta, grids, targets = teleop_data
+    model = surrogate_for(domain, epochs=1)
+    first = model.fit(theta, grids, targets)
+    for _ in range(20):
+        last = model.fit(theta, grids, targets)
+    assert last.occupancy_loss < first.occupancy_loss
+    assert last.predictor_loss < first.predictor_loss
+    assert np.isfinite(model.predict(theta)).all()
+
+
+def test_the_batched_jacobian_equals_autograd_on_single_inputs(teleop_data):
+    domain, theta, grids, targets = teleop_data
+    model = surrogate_for(domain, epochs=2)
+    model.fit(theta, grids, targets)
+    objective = SurrogateObjective(domain, model)
+    points = theta[:4].astype(np.float64) + 0.03  # some outside the bounds, so the penalty matters too
+    obj, measures, jacobian = objective.with_jacobian(points)
+    assert jacobian.shape == (4, 3, 9)
+    for i, point in enumerate(points):
+        x = torch.tensor(point[None], dtype=torch.float32)
+        single = torch.autograd.functional.jacobian(lambda v: objective._outputs(v)[0], x)[:, 0, :]
+        np.testing.assert_allclose(jacobian[i], single.numpy(), rtol=1e-4, atol=1e-5)
+    plain_obj, plain_measures = objective(points)
+    np.testing.assert_allclose(obj, plain_obj, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(measures, plain_measures, rtol=1e-5, atol=1e-6)
+
+
+def test_the_penalty_pulls_the_inner_objective_down_outside_the_bounds(teleop_data):
+    domain, theta, grids, targets = teleop_data
+    objective = SurrogateObjective(domain, surrogate_for(domain))
+    inside = theta[:1].astype(np.float64)
+    outside = inside.copy()
+    outside[0, 0] = domain.space.upper[0] + 0.5  # g0x half a metre past its bound
+    assert objective.penalty(torch.tensor(inside, dtype=torch.float32)).item() == 0
+    assert objective.penalty(torch.tensor(outside, dtype=torch.float32)).item() == pytest.approx(0.25, rel=1e-3)
+
+
+@pytest.mark.parametrize("gradients", [False, True])
+def test_the_inner_loop_fills_an_archive_and_downsampling_takes_one_per_block(teleop_data, gradients):
+    domain, theta, grids, targets = teleop_data
+    model = surrogate_for(domain)
+    model.fit(theta, grids, targets)
+    archive = exploit(domain, SurrogateObjective(domain, model), gradients=gradients, iterations=10, seed=1)
+    assert archive.stats.num_elites > 0
+    chosen = downsample(domain, archive, rng=np.random.default_rng(0))
+    assert 0 < len(chosen) <= min(archive.stats.num_elites, 5 * 20)
+    cells = {tuple(np.minimum(np.floor((m - np.array([0, 0])) / np.array([0.32 / 5, 0.112 / 20])), [4, 19]))
+             for m in objective_measures(domain, model, chosen)}
+    assert len(cells) == len(chosen)  # no two from the same block
+
+
+def objective_measures(domain, model, solutions):
+    return SurrogateObjective(domain, model)(solutions)[1]
+
+
+@pytest.mark.parametrize("algorithm", ["sas", "dsas"])
+def test_a_tiny_run_completes_and_resumes(tmp_path, algorithm):
+    text = (SPECS / "teleop.yaml").read_text().replace(
+        "surrogate: {initial_evaluations: 100, inner_iterations: 10000, downsample_cells: [5, 20]}",
+        "surrogate: {initial_evaluations: 30, inner_iterations: 20, downsample_cells: [3, 5], epochs: 5}")
+    spec = tmp_path / "teleop.yaml"
+    spec.write_text(text)
+    backend = qd.Backend(workers=2, timeout=60)
+    found = qd.start(spec_file=spec, out=tmp_path / "run", algorithm=algorithm, budget=60, seed=0, backend=backend,
+                     surrogate=qd.SurrogateOptions(device="cpu"))
+    records = RunDirectory.open(tmp_path / "run").evaluations()
+    assert sorted(r["index"] for r in records) == list(range(60))
+    assert found.state["proposer"].outer >= 2
+    accuracy = found.state["proposer"].accuracy(found.domain)
+    assert accuracy["held_out"] > 0 and np.isfinite(accuracy["objective_mae"])
+    assert (tmp_path / "run" / "surrogate.json").is_file()
+
+    # Resume after the run "was killed" right after asking a batch: rewind to an earlier checkpoint.
+    run = RunDirectory.open(tmp_path / "run")
+    state = run.load_checkpoint()
+    state["budget"] = 80
+    run.save_checkpoint(state)
+    again = qd.resume(run_path=tmp_path / "run", backend=backend)
+    assert again.state["evaluations"] == 80
+    assert sorted(r["index"] for r in RunDirectory.open(tmp_path / "run").evaluations()) == list(range(80))
