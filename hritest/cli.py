@@ -255,6 +255,10 @@ def search(
                              backend=backend, progress=progress,
                              surrogate=qd.SurrogateOptions(inner_iterations=inner_iterations, device=device))
     _print_summary(found)
+    from hritest.report import write_report
+
+    report = write_report(found.run_dir.path)
+    out.print(f"report: {report}", highlight=False)
     if found.failures():
         raise typer.Exit(EXIT_FINDING)
 

@@ -47,6 +47,7 @@ def atomic_write(path: Path, data: bytes | str) -> None:
     raw = data.encode() if isinstance(data, str) else data
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
     try:
+        os.fchmod(fd, 0o644)  # mkstemp's 0600 would hide a run from the rest of a team
         with os.fdopen(fd, "wb") as handle:
             handle.write(raw)
             handle.flush()

@@ -1,0 +1,170 @@
+"""Reports of real (toy-domain) searches: files, numbers, embedded figures, comparison, bad input."""
+
+from __future__ import annotations
+
+import base64
+import csv
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from hritest import search as qd
+from hritest.cli import app
+from hritest.report import most_different, worst_failures, write_report
+from hritest.rundir import RunDirectory
+
+FIXTURES = Path(__file__).parent.parent / "fixtures"
+runner = CliRunner()
+
+
+def toy_run(folder: Path, *, failure: str = "objective >= 8", budget: int = 150, seed: int = 1) -> Path:
+    """A finished random search of the toy domain in ``folder/run``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    shutil.copy(FIXTURES / "toy_plugins.py", folder / "toy_plugins.py")
+    spec = folder / "toy.yaml"
+    spec.write_text((FIXTURES / "toy.yaml").read_text().replace("failure: objective >= 8", f"failure: {failure}"))
+    qd.start(spec_file=spec, out=folder / "run", algorithm="random", budget=budget, seed=seed,
+             backend=qd.Backend(workers=1))
+    return folder / "run"
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory) -> Path:
+    return toy_run(tmp_path_factory.mktemp("toy"))
+
+
+@pytest.fixture(scope="module")
+def calm_run(tmp_path_factory) -> Path:
+    """A run whose failure condition no scenario meets."""
+    return toy_run(tmp_path_factory.mktemp("calm"), failure="objective >= 100", budget=100, seed=2)
+
+
+@pytest.fixture(scope="module")
+def reported(run) -> Path:
+    return write_report(run, recordings=2)
+
+
+def failures_of(run: Path) -> list[dict]:
+    return yaml.safe_load((run / "failures.yaml").read_text())["failures"]
+
+
+def test_report_files_exist_with_embedded_figures(run, reported):
+    assert reported == run / "report" / "index.html"
+    for name in ("index.html", "summary.md", "archive.png", "qd_score.png"):
+        assert (run / "report" / name).is_file(), name
+    page = reported.read_text()
+    images = re.findall(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"', page)
+    assert len(images) == 2  # the archive heatmap and the QD-score curves
+    assert all(base64.b64decode(data).startswith(b"\x89PNG\r\n\x1a\n") for data in images)
+    assert "src=\"http" not in page and "<script" not in page  # self-contained, opens from disk
+    assert "![result archive of run](archive.png)" in (run / "report" / "summary.md").read_text()
+
+
+def test_report_shows_the_numbers_of_progress_csv(run, reported):
+    page = reported.read_text()
+    with open(run / "progress.csv", newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    last = rows[-1]
+    assert f"{float(last['qd_score']):.2f}" in page
+    assert f"{float(last['normalized_qd_score']):.4f}" in page
+    assert f"{float(last['coverage']):.2%}" in page
+    assert f"{float(last['wall_time']):.1f} s" in page
+    assert f"{int(last['evaluations'])} of a budget of 150" in page
+    for row in rows:  # the full log, folded away
+        assert f'<td class="num">{int(row["evaluations"])}</td>' in page
+        assert f'<td class="num">{float(row["qd_score"]):.6g}</td>' in page
+    assert "150 ok" in page  # the statuses
+
+
+def test_report_lists_every_failure_and_links_recordings(run, reported):
+    page = reported.read_text()
+    failures = failures_of(run)
+    assert failures, "the toy search should find failures"
+    assert f"{len(failures)} elites meet" in page
+    for failure in failures:
+        assert f'<td class="num">{failure["id"]}</td>' in page
+    recorded = sorted((run / "recordings").glob("*.rrd"))
+    # The 2 worst plus the worst of each block of the measure space.
+    records = {r["index"]: r for r in RunDirectory.open(run).evaluations()}
+    reported_failures = [records[f["id"]] for f in failures]
+    ranges = [(0.0, 0.32), (0.0, 0.087)]
+    expected = {r["index"] for r in worst_failures(reported_failures, 2)}
+    expected |= {r["index"] for _, r in most_different(reported_failures, ranges)}
+    assert {int(p.stem) for p in recorded} == expected
+    for path in recorded:
+        assert f'href="../recordings/{path.name}"' in page
+    assert "each re-simulation reproduced its stored outcome" in page
+
+
+def test_most_different_takes_the_worst_failure_of_each_block():
+    failures = [
+        {"index": 1, "objective": 9.0, "measures": [0.05, 0.01]},
+        {"index": 2, "objective": 9.5, "measures": [0.06, 0.02]},  # same block as 1, worse
+        {"index": 3, "objective": 8.0, "measures": [0.31, 0.08]},
+        {"index": 4, "objective": 8.5, "measures": [0.5, 0.2]},  # out of range: clipped to the last block
+    ]
+    picked = most_different(failures, [(0.0, 0.32), (0.0, 0.087)])
+    assert [(block, r["index"]) for block, r in picked] == [("low / low", 2), ("high / high", 4)]
+    assert [r["index"] for r in worst_failures(failures, 3)] == [2, 1, 4]
+
+
+def test_a_run_without_failures_says_so(calm_run):
+    result = runner.invoke(app, ["report", str(calm_run)])
+    assert result.exit_code == 0, result.output
+    page = (calm_run / "report" / "index.html").read_text()
+    assert "No failures: no elite of the result archive meets the failure condition" in page
+    assert "objective &gt;= 100" in page
+    assert not (calm_run / "recordings").exists()
+    assert "No failures" in (calm_run / "report" / "summary.md").read_text()
+
+
+def test_comparing_two_runs(run, calm_run, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    result = runner.invoke(app, ["report", str(run), str(calm_run)])
+    assert result.exit_code == 0, result.output
+    page = (tmp_path / "report-compare" / "index.html").read_text()
+    assert "comparison of 2 runs" in page
+    assert page.count("data:image/png;base64,") == 2  # shared curves, archives side by side
+    for folder in (run, calm_run):
+        last = list(csv.DictReader(open(folder / "progress.csv", newline="")))[-1]
+        assert f"{float(last['qd_score']):.2f}" in page
+    assert "different specs" in page  # the two toy specs differ in their failure condition
+    assert (tmp_path / "report-compare" / "summary.md").is_file()
+
+    result = runner.invoke(app, ["report", str(run), str(calm_run), "--out", str(tmp_path / "cmp")])
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "cmp" / "index.html").is_file()
+
+
+def test_bad_input_exits_2(run, tmp_path):
+    result = runner.invoke(app, ["report", str(tmp_path / "missing")])
+    assert result.exit_code == 2
+    assert "is not a folder" in result.output
+
+    empty = RunDirectory.create(root=tmp_path, spec_file=run / "spec.yaml", name="empty", meta={"spec_base": "."},
+                                folder=tmp_path / "empty")
+    result = runner.invoke(app, ["report", str(empty.path)])
+    assert result.exit_code == 2
+    assert "has no evaluations yet" in result.output
+
+    blocked = tmp_path / "blocked"
+    shutil.copytree(run, blocked)
+    shutil.rmtree(blocked / "recordings", ignore_errors=True)
+    (blocked / "recordings").write_text("a file where the recordings folder should be")
+    result = runner.invoke(app, ["report", str(blocked)])
+    assert result.exit_code == 2
+    assert "cannot write the recording" in result.output
+
+
+def test_surrogate_accuracy_is_tabled_when_the_run_has_one(calm_run, tmp_path):
+    run = tmp_path / "run"
+    shutil.copytree(calm_run, run)
+    (run / "surrogate.json").write_text('{"objective": {"mae": 0.123456789, "r2": 0.9}, "trained_on": 100}')
+    page = write_report(run, recordings=0).read_text()
+    assert "Surrogate accuracy (surrogate.json)" in page
+    for text in ("objective.mae", "0.123457", "objective.r2", "trained_on"):
+        assert text in page
