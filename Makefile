@@ -14,9 +14,13 @@ $(BIN)/hritest: pyproject.toml
 	touch $@
 
 .PHONY: demo test
+# The main job, small: DSAS on the collaboration domain, 250 real evaluations, a short inner loop.
+# hritest search exits 1 when it finds failures, which is the point of the demo, not an error.
 demo: $(BIN)/hritest
 	$(BIN)/hritest validate specs/*.yaml
 	$(BIN)/hritest show specs/collab.yaml
+	$(BIN)/hritest search specs/collab.yaml --algorithm dsas --budget 250 --inner-iterations 100 \
+		|| test $$? -eq 1
 
 test: $(BIN)/hritest
 	$(BIN)/python -m pytest
