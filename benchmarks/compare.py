@@ -1,0 +1,89 @@
+"""The paper's experiment: every algorithm on one spec, several seeds, QD-score at the end.
+
+    python benchmarks/compare.py specs/teleop.yaml --algorithms dsas,sas,cma_mae,map_elites,random \\
+        --evals 2000 --seeds 3 [--inner-iterations 1000] [--workers 2] [--device auto] [--out DIR]
+
+Prints a Markdown table (final QD-score raw and normalised, mean +- standard error over seeds,
+coverage, best objective, wall time, evaluations per second, and each algorithm's QD-score over
+Random's), and writes it with every run and a comparison report (curves and heatmaps side by
+side, one run per algorithm: its first seed) into ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import statistics
+import time
+from pathlib import Path
+
+from hritest import search as qd
+from hritest.report import compare_runs
+
+
+def final_row(run: Path) -> dict[str, float]:
+    with open(run / "progress.csv") as handle:
+        rows = list(csv.DictReader(handle))
+    return {k: float(v) for k, v in rows[-1].items()}
+
+
+def mean_sem(values: list[float]) -> str:
+    mean = statistics.fmean(values)
+    sem = statistics.stdev(values) / math.sqrt(len(values)) if len(values) > 1 else 0.0
+    return f"{mean:,.1f} ± {sem:,.1f}" if abs(mean) >= 10 else f"{mean:.4f} ± {sem:.4f}"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("spec", type=Path)
+    parser.add_argument("--algorithms", default="dsas,sas,cma_mae,map_elites,random")
+    parser.add_argument("--evals", type=int, default=2000)
+    parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--inner-iterations", type=int, default=None)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--device", default="auto")
+    parser.add_argument("--out", type=Path, default=None)
+    args = parser.parse_args()
+    algorithms = [a.strip() for a in args.algorithms.split(",") if a.strip()]
+    out = args.out or Path("benchmark-runs") / f"{args.spec.stem}-{time.strftime('%Y%m%d-%H%M%S')}"
+
+    results: dict[str, list[dict[str, float]]] = {}
+    for algorithm in algorithms:
+        for seed in range(args.seeds):
+            run = out / f"{algorithm}-s{seed}"
+            start = time.perf_counter()
+            qd.start(spec_file=args.spec, out=run, algorithm=algorithm, budget=args.evals, seed=seed,
+                     backend=qd.Backend(workers=args.workers),
+                     surrogate=qd.SurrogateOptions(inner_iterations=args.inner_iterations, device=args.device))
+            row = final_row(run)
+            row["total_seconds"] = time.perf_counter() - start
+            results.setdefault(algorithm, []).append(row)
+            print(f"{algorithm} seed {seed}: QD-score {row['qd_score']:,.1f} in {row['total_seconds']:.0f} s",
+                  flush=True)
+
+    random_qd = statistics.fmean(r["qd_score"] for r in results["random"]) if "random" in results else None
+    lines = [
+        f"{args.spec.name}: {args.evals} evaluations, {args.seeds} seeds, inner iterations "
+        f"{args.inner_iterations or 'spec default'}, {args.workers} workers",
+        "",
+        "| algorithm | QD-score | normalised QD-score | coverage | best | wall s | evaluations / s | QD-score / Random |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for algorithm, rows in results.items():
+        qd_scores = [r["qd_score"] for r in rows]
+        seconds = statistics.fmean(r["total_seconds"] for r in rows)
+        ratio = f"{statistics.fmean(qd_scores) / random_qd:.2f}" if random_qd else "n/a"
+        lines.append(
+            f"| {algorithm} | {mean_sem(qd_scores)} | {mean_sem([r['normalized_qd_score'] for r in rows])} | "
+            f"{mean_sem([r['coverage'] for r in rows])} | {statistics.fmean(r['best'] for r in rows):.3g} | "
+            f"{seconds:,.0f} | {args.evals / seconds:.1f} | {ratio} |")
+    table = "\n".join(lines)
+    print(table)
+    (out / "table.md").write_text(table + "\n")
+    page = compare_runs([out / f"{a}-s0" for a in results], out / "report")
+    print(f"comparison report: {page}")
+
+
+if __name__ == "__main__":
+    main()
