@@ -222,8 +222,8 @@ def search(
     budget: Annotated[int | None, typer.Option(min=1, help="real evaluations (default: the spec's)",
                                                rich_help_panel="Search")] = None,
     seed: Annotated[int | None, typer.Option(help="default: the spec's", rich_help_panel="Search")] = None,
-    out: Annotated[Path | None, typer.Option(help="run directory (default: runs/<spec>-<time>)",
-                                             rich_help_panel="Run")] = None,
+    out_dir: Annotated[Path | None, typer.Option("--out", help="run directory (default: runs/<spec>-<time>)",
+                                                 rich_help_panel="Run")] = None,
     workers: Annotated[int, typer.Option(help="local worker processes (default: all cores)",
                                          rich_help_panel="Run")] = os.cpu_count() or 1,
     cluster: Annotated[str | None, typer.Option(help="Dask scheduler address, e.g. tcp://host:8786",
@@ -251,7 +251,7 @@ def search(
         if resume is not None:
             found = qd.resume(run_path=resume, backend=backend, progress=progress)
         else:
-            found = qd.start(spec_file=spec, out=out, algorithm=algorithm, budget=budget, seed=seed,
+            found = qd.start(spec_file=spec, out=out_dir, algorithm=algorithm, budget=budget, seed=seed,
                              backend=backend, progress=progress,
                              surrogate=qd.SurrogateOptions(inner_iterations=inner_iterations, device=device))
     _print_summary(found)
@@ -417,6 +417,44 @@ def _print_replay(result) -> None:  # noqa: ANN001 - hritest.replay.Replay
               f"{result.tolerance:g} absolute", highlight=False)
     verdict = "[green]replay matches[/green]" if result.matches else "[red]replay does NOT match[/red]"
     out.print(f"{verdict} (scenario digest {result.digest[:16]})")
+
+
+@command
+def promote(
+    run: Annotated[Path | None, typer.Argument(help="a run directory whose failures to keep", show_default=False)]
+    = None,
+    top: Annotated[int | None, typer.Option(min=1, help="only the N worst failures (default: all)",
+                                            show_default=False)] = None,
+    to: Annotated[Path | None, typer.Option(help="the corpus folder (default: \\[tool.hritest] corpus in the nearest "
+                                            "pyproject.toml, else tests/hri_failures)", show_default=False)] = None,
+    mark_fixed: Annotated[list[str] | None, typer.Option(
+        "--mark-fixed", metavar="ID", help="set status: fixed on this corpus entry (its id, spec/id or file); "
+        "repeat for several", show_default=False)] = None,
+) -> None:
+    """Keep a run's failures in the failure corpus that pytest replays; mark corpus entries fixed.
+
+    One YAML file per failure, CORPUS/SPEC/ID.yaml, status open (xfail under pytest) or fixed (must not fail again).
+    """
+    from hritest import corpus as hc
+
+    if run is None and not mark_fixed:
+        raise typer.BadParameter("give a RUN directory to promote from, or --mark-fixed ID (or both)")
+    folder = to if to is not None else hc.default_corpus(Path.cwd())
+    if run is not None:
+        if mark_fixed and not run.is_dir():
+            raise HritestError(f"{run} is not a run directory; to mark several entries fixed repeat the "
+                               "option: --mark-fixed ID --mark-fixed ID")
+        promoted = hc.promote(run, corpus=folder, top=top)
+        for p in promoted:
+            verb = "[green]added[/green]  " if p.added else "unchanged"
+            out.print(f"{verb} {p.path}  (evaluation {p.evaluation}, objective {p.objective:.6g})", highlight=False)
+        added = sum(p.added for p in promoted)
+        out.print(f"{added} added, {len(promoted) - added} already in the corpus {folder}"
+                  + ("" if promoted else f" ({run} has no failures)"), highlight=False)
+    if mark_fixed:
+        for path, before in hc.mark_fixed(folder, [i for ids in mark_fixed for i in ids.split(",") if i]):
+            note = "was already fixed" if before == "fixed" else "open -> fixed"
+            out.print(f"fixed {path}  ({note})", highlight=False)
 
 
 if __name__ == "__main__":

@@ -99,7 +99,7 @@ def test_a_killed_run_resumes_to_the_same_state(toy_spec, tmp_path):
     assert 350 < len(before) < 700
 
     result = runner.invoke(app, ["search", "--resume", str(killed), "--workers", "2", "--quiet"])
-    assert result.exit_code in (0, 1), result.output
+    assert result.exit_code in (0, 1) and isinstance(result.exception, SystemExit | None), result.output
     after = RunDirectory.open(killed).evaluations()
     assert sorted(r["index"] for r in after) == list(range(700))
     done_before = {r["index"]: r for r in before}
@@ -147,3 +147,11 @@ def test_run_json_records_what_is_needed_to_reproduce(toy_spec, tmp_path):
     meta = json.loads((tmp_path / "run" / "run.json").read_text())
     assert meta["seed"] == 2 and meta["algorithm"] == "random" and meta["budget"] == 10
     assert {"hritest", "mujoco", "ribs", "numpy"} <= set(meta["versions"])
+
+
+def test_the_command_line_search_ends_with_a_report_and_exit_1_for_failures(toy_spec, tmp_path):
+    result = runner.invoke(app, ["search", str(toy_spec()), "--budget", "120", "--workers", "2", "--quiet",
+                                 "--out", str(tmp_path / "run")])
+    assert result.exit_code == 1 and isinstance(result.exception, SystemExit), result.output
+    assert "failures" in result.output and (tmp_path / "run" / "report" / "index.html").is_file()
+    assert f"report: {tmp_path / 'run' / 'report' / 'index.html'}" in result.output

@@ -1,0 +1,369 @@
+"""The failure corpus: failures kept in the user's repository as small YAML files, replayed by pytest.
+
+Layout: ``<corpus>/<spec name>/<scenario digest[:12]>.yaml``, one file per failure::
+
+    # hritest failure corpus entry (replayed by pytest). Change `status` by hand or with
+    # `hritest promote --mark-fixed ID`; edit nothing else.
+    format: 1
+    status: open                # open: still a failure (xfail); fixed: must not fail (regression)
+    spec: ../../../specs/teleop.yaml   # relative to this file
+    spec_name: teleop
+    spec_digest: 4d3d387f...    # sha256 of the spec file's bytes when it was recorded
+    failure_condition: objective >= 10
+    seed: 3344922676
+    objective: 10.0
+    measures: {goal_distance: 0.045, variation: 0.077}
+    theta: {g0x: 0.588, ...}          # raw, as the search proposed it (what a replay evaluates)
+    theta_repaired: {g0x: 0.588, ...}
+    metrics: {completion_time: 10.0, ...}
+    scenario_digest: 3f2a9c1b4d5e...  # sha256 of spec digest, repaired theta and seed
+    versions: {hritest: 0.1.0, mujoco: 4.0.0, ...}
+    origin: {run: /abs/runs/teleop-..., evaluation: 33, promoted: '2026-...'}
+
+This module reads and writes entries with the standard library and PyYAML only, so that the
+pytest plugin can collect a corpus without importing the simulator; :func:`promote` (the CLI's)
+imports the heavy modules when it runs.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+from hritest.errors import HritestError
+
+FORMAT = 1
+DEFAULT_CORPUS = Path("tests") / "hri_failures"
+STATUSES = ("open", "fixed")
+HEADER = ("# hritest failure corpus entry (replayed by pytest). Change `status` by hand or with\n"
+          "# `hritest promote --mark-fixed ID`; edit nothing else.\n")
+_HEX64 = re.compile(r"[0-9a-f]{64}")
+
+
+class CorpusError(HritestError):
+    """A corpus entry that cannot be read or written, naming the file and the field."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Entry:
+    """One corpus file, validated. ``theta`` and ``theta_repaired`` map labels to values in order.
+
+    ``id`` is the file's name without ``.yaml`` (the scenario digest's first 12 hex digits).
+    """
+
+    path: Path
+    id: str
+    status: str
+    spec: str
+    spec_name: str
+    spec_digest: str
+    seed: int
+    objective: float
+    measures: dict[str, float]
+    theta: dict[str, float]
+    theta_repaired: dict[str, float]
+    metrics: dict[str, float | None]
+    failure_condition: str = ""
+    scenario_digest: str = ""
+    versions: dict[str, Any] | None = None
+    origin: dict[str, Any] | None = None
+
+    @property
+    def spec_path(self) -> Path:
+        """The spec file, resolved against this entry's folder."""
+        return (self.path.parent / self.spec).resolve()
+
+
+# --- locating the corpus -----------------------------------------------------------------------
+
+
+def default_corpus(start: Path) -> Path:
+    """The corpus folder for a project at or above ``start``.
+
+    The nearest ``pyproject.toml`` at or above ``start`` decides: its ``[tool.hritest] corpus``
+    (relative to that file), else ``tests/hri_failures`` beside it. Without one, ``start/tests/hri_failures``.
+    """
+    start = Path(start).resolve()
+    for folder in (start, *start.parents):
+        pyproject = folder / "pyproject.toml"
+        if pyproject.is_file():
+            configured = _configured_corpus(pyproject)
+            return folder / (configured if configured is not None else DEFAULT_CORPUS)
+    return start / DEFAULT_CORPUS
+
+
+def _configured_corpus(pyproject: Path) -> str | None:
+    import tomllib
+
+    try:
+        data = tomllib.loads(pyproject.read_text())
+    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError):
+        return None  # not ours to judge; pip or pytest will complain about a broken pyproject.toml
+    value = data.get("tool", {}).get("hritest", {}).get("corpus")
+    if value is not None and not isinstance(value, str):
+        raise CorpusError(f"{pyproject}: [tool.hritest] corpus must be a folder path (a string), "
+                          f"got {value!r} ({type(value).__name__})")
+    return value
+
+
+def entry_files(corpus: Path) -> list[Path]:
+    """Every entry file of the corpus (``<spec>/<id>.yaml``), sorted."""
+    corpus = Path(corpus)
+    return sorted(corpus.glob("*/*.yaml")) if corpus.is_dir() else []
+
+
+# --- reading -----------------------------------------------------------------------------------
+
+
+def load_entry(path: Path) -> Entry:
+    """Reads and validates one corpus file.
+
+    Raises:
+        CorpusError: unreadable YAML, a missing field, or a field of the wrong type; the message
+            names the file and the field.
+    """
+    import yaml
+
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except OSError as exc:
+        raise CorpusError(f"{path}: cannot be read ({exc.strerror})") from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f":{mark.line + 1}:{mark.column + 1}" if mark else ""
+        raise CorpusError(f"{path}{where}: not valid YAML ({getattr(exc, 'problem', None) or exc})") from None
+    if not isinstance(data, dict):
+        raise CorpusError(f"{path}: a corpus entry is a YAML mapping of fields, got {type(data).__name__}")
+    field = _Fields(path, data)
+    if data.get("format", FORMAT) != FORMAT:
+        raise field.bad("format", f"this hritest reads corpus format {FORMAT}")
+    status = field.text("status")
+    if status not in STATUSES:
+        raise field.bad("status", "must be 'open' or 'fixed'")
+    digest = field.text("spec_digest")
+    if not _HEX64.fullmatch(digest):
+        raise field.bad("spec_digest", "must be the 64-hex-digit sha256 of the spec file")
+    theta = field.numbers("theta")
+    repaired = field.numbers("theta_repaired")
+    if list(theta) != list(repaired):
+        raise field.bad("theta_repaired", f"must have the same labels as theta ({', '.join(theta)})")
+    return Entry(
+        path=path,
+        id=path.stem,
+        status=status,
+        spec=field.text("spec"),
+        spec_name=field.text("spec_name"),
+        spec_digest=digest,
+        seed=field.integer("seed"),
+        objective=field.number("objective"),
+        measures=field.numbers("measures"),
+        theta=theta,
+        theta_repaired=repaired,
+        metrics=field.numbers("metrics", required=False, nullable=True),
+        failure_condition=str(data.get("failure_condition") or ""),
+        scenario_digest=str(data.get("scenario_digest") or ""),
+        versions=field.mapping("versions"),
+        origin=field.mapping("origin"),
+    )
+
+
+class _Fields:
+    """Typed access to a corpus file's fields; every error names the file and the field."""
+
+    def __init__(self, path: Path, data: dict[str, Any]) -> None:
+        self.path, self.data = path, data
+
+    def bad(self, name: str, message: str) -> CorpusError:
+        value = self.data.get(name)
+        shown = "" if name not in self.data else f" (got {value!r}, {type(value).__name__})"
+        return CorpusError(f"{self.path}: field '{name}': {message}{shown}")
+
+    def _get(self, name: str) -> Any:
+        if name not in self.data:
+            raise CorpusError(f"{self.path}: field '{name}' is missing")
+        return self.data[name]
+
+    def text(self, name: str) -> str:
+        value = self._get(name)
+        if not isinstance(value, str) or not value:
+            raise self.bad(name, "must be a non-empty string")
+        return value
+
+    def integer(self, name: str) -> int:
+        value = self._get(name)
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.bad(name, "must be an integer")
+        return value
+
+    def number(self, name: str) -> float:
+        value = self._get(name)
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+            raise self.bad(name, "must be a finite number")
+        return float(value)
+
+    def numbers(self, name: str, *, required: bool = True, nullable: bool = False) -> dict[str, Any]:
+        if not required and name not in self.data:
+            return {}
+        value = self._get(name)
+        if not isinstance(value, dict) or not value and required:
+            raise self.bad(name, "must be a mapping of names to numbers")
+        out: dict[str, Any] = {}
+        for key, item in value.items():
+            if item is None and nullable:
+                out[str(key)] = None
+            elif isinstance(item, bool) or not isinstance(item, int | float):
+                raise CorpusError(f"{self.path}: field '{name}.{key}': must be a number (got {item!r})")
+            else:
+                out[str(key)] = float(item)
+        return out
+
+    def mapping(self, name: str) -> dict[str, Any] | None:
+        value = self.data.get(name)
+        if value is not None and not isinstance(value, dict):
+            raise self.bad(name, "must be a mapping")
+        return value
+
+
+# --- writing -----------------------------------------------------------------------------------
+
+
+def dump_entry(data: dict[str, Any]) -> str:
+    """The text of a corpus file: the header comment, then the fields in a fixed order."""
+    import yaml
+
+    return HEADER + yaml.safe_dump(data, sort_keys=False, default_flow_style=False, width=100)
+
+
+def set_status(path: Path, status: str) -> None:
+    """Rewrites the ``status:`` line of a corpus file (atomically), leaving every other line alone."""
+    from hritest.rundir import atomic_write
+
+    if status not in STATUSES:
+        raise CorpusError(f"status must be one of {', '.join(STATUSES)}, not {status!r}")
+    text = Path(path).read_text()
+    new, count = re.subn(r"^status:[^\n#]*", f"status: {status}", text, count=1, flags=re.MULTILINE)
+    if count != 1:
+        raise CorpusError(f"{path}: field 'status' is missing")
+    atomic_write(Path(path), new)
+
+
+@dataclass(frozen=True)
+class Promoted:
+    """One failure of a run and where it stands in the corpus."""
+
+    path: Path
+    evaluation: int
+    objective: float
+    added: bool  # False: the corpus already held it (its status is left as it was)
+
+
+def promote(run_path: Path, *, corpus: Path, top: int | None = None) -> list[Promoted]:
+    """Copies the ``top`` worst failures of a run (all by default) into the corpus.
+
+    Idempotent: a failure already in the corpus (same scenario digest) is left untouched.
+
+    Raises:
+        RunDirectoryError: not a run directory.
+        CorpusError: the spec changed since the run, or the corpus folder cannot be written.
+    """
+    from hritest import replay
+    from hritest.rundir import RunDirectory, atomic_write, digest
+
+    run = RunDirectory.open(run_path)
+    spec_file = Path(run.meta["spec_file"])
+    spec_digest = run.meta["spec_digest"]
+    if not spec_file.is_file():
+        raise CorpusError(f"{spec_file} (the spec of {run.path}) no longer exists; a corpus entry must point "
+                          "at the spec it replays with")
+    if digest(spec_file) != spec_digest:
+        raise CorpusError(f"{spec_file} changed since the run {run.path} started, so its failures would be "
+                          "stale at once; run a new search with the current spec and promote from that")
+    records = {r["index"]: r for r in run.evaluations()}
+    ids = replay.failure_ids(run, list(records.values()))
+    chosen = ids if top is None else ids[:top]
+    if not chosen:
+        return []
+    domain = replay.run_domain(run)
+    labels = domain.space.labels
+    folder = Path(corpus) / domain.spec.name
+    _writable(folder)
+    done = []
+    for index in chosen:
+        record = records[index]
+        scenario = replay.scenario_digest(spec_digest, record["theta_repaired"], record["seed"])
+        path = folder / f"{scenario[:12]}.yaml"
+        added = not path.exists()
+        if added:
+            data = {
+                "format": FORMAT,
+                "status": "open",
+                "spec": os.path.relpath(spec_file.resolve(), folder.resolve()),
+                "spec_name": domain.spec.name,
+                "spec_digest": spec_digest,
+                "failure_condition": domain.spec.failure,
+                "seed": int(record["seed"]),
+                "objective": record["objective"],
+                "measures": {m.name: v for m, v in zip(domain.measures, record["measures"])},
+                "theta": dict(zip(labels, record["theta"])),
+                "theta_repaired": dict(zip(labels, record["theta_repaired"])),
+                "metrics": dict(record.get("metrics") or {}),
+                "scenario_digest": scenario,
+                "versions": {k: v for k, v in run.meta.get("versions", {}).items()
+                             if k in ("hritest", "mujoco", "python", "machine")},
+                "origin": {"run": str(run.path.resolve()), "evaluation": index,
+                           "promoted": datetime.now(timezone.utc).isoformat(timespec="seconds")},
+            }
+            atomic_write(path, dump_entry(data))
+        done.append(Promoted(path=path, evaluation=index, objective=record["objective"], added=added))
+    return done
+
+
+def _writable(folder: Path) -> None:
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise CorpusError(f"cannot create the corpus folder {folder} ({exc.strerror}); choose another with --to")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise CorpusError(f"the corpus folder {folder} is not writable; choose another with --to")
+
+
+def find_entries(corpus: Path, ids: list[str]) -> list[Path]:
+    """The corpus files that ``ids`` name: an id, a file name, or a path (to the file or within the corpus).
+
+    Raises:
+        CorpusError: an id that names no entry, or more than one; nothing is returned then.
+    """
+    files = entry_files(corpus)
+    found, unknown = [], []
+    for ident in ids:
+        name = ident.removesuffix(".yaml")
+        matches = [f for f in files if name in (f.stem, str(f.relative_to(corpus).with_suffix("")))]
+        if not matches and Path(ident).is_file():
+            matches = [f for f in files if f.resolve() == Path(ident).resolve()]
+        if len(matches) > 1:
+            raise CorpusError(f"{ident!r} names {len(matches)} corpus entries "
+                              f"({', '.join(str(m.relative_to(corpus)) for m in matches)}); give spec/id")
+        (found.append(matches[0]) if matches else unknown.append(ident))
+    if unknown:
+        known = ", ".join(str(f.relative_to(corpus).with_suffix("")) for f in files[:30]) or "none"
+        raise CorpusError(f"no corpus entry {', '.join(map(repr, unknown))} in {corpus}; its entries are: {known}")
+    return found
+
+
+def mark_fixed(corpus: Path, ids: list[str]) -> list[tuple[Path, str]]:
+    """Sets ``status: fixed`` on the entries ``ids`` name; returns each path with its previous status.
+
+    Every id is checked (and every file read) before any file is changed.
+    """
+    paths = find_entries(corpus, ids)
+    before = [(path, load_entry(path).status) for path in paths]
+    for path, status in before:
+        if status != "fixed":
+            set_status(path, "fixed")
+    return before

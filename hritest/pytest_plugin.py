@@ -1,0 +1,465 @@
+"""hritest's pytest plugin: the failure corpus replays as regression tests.
+
+Registered through the ``pytest11`` entry point, so pytest imports this module in *every* run of
+every project where hritest is installed. It therefore imports only the standard library, pytest and
+:mod:`hritest.corpus` at module level; the simulator, the repair solver and the rest load the first
+time a corpus entry (or the ``hri_scenario`` fixture) actually runs.
+
+Each corpus file ``<corpus>/<spec>/<id>.yaml`` becomes one test, ``<file>::<spec>::<id>``, that
+re-simulates the stored scenario with the current plugins and judges it by the spec's failure
+condition:
+
+=========================  =================================  ===================
+entry status               the scenario now                   reported as
+=========================  =================================  ===================
+``fixed``                  still passes                       passed
+``fixed``                  fails again                        FAILED (regression)
+``open``                   still fails                        xfailed
+``open``                   passes                             XPASS (now passing)
+either                     spec changed since it was stored   skipped (stale)
+=========================  =================================  ===================
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from hritest import corpus as hc
+from hritest.errors import HritestError
+
+OUTCOMES = ("regression", "still failing", "now passing", "stale", "passing", "error", "search with new failures")
+
+_corpus_key = pytest.StashKey[Path]()
+_domains_key = pytest.StashKey[dict]()
+
+
+# --- options, configuration, header --------------------------------------------------------------
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    group = parser.getgroup("hritest", "hritest failure corpus")
+    group.addoption("--hri-corpus", metavar="DIR", default=None,
+                    help="the failure corpus to replay (default: [tool.hritest] corpus in pyproject.toml, "
+                         "else tests/hri_failures; relative to the rootdir)")
+    group.addoption("--hri-spec", metavar="SPEC", action="append", default=[],
+                    help="replay only the entries of this spec (its name or its file); repeatable")
+    group.addoption("--hri-mark-fixed", action="store_true", default=False,
+                    help="set status: fixed in the corpus files of open failures that no longer fail")
+    group.addoption("--hri-search-budget", metavar="N", type=int, default=0,
+                    help="also run a Random search of N evaluations per spec in the corpus (the spec's seed); "
+                         "a failure it finds that the corpus does not hold fails the session")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line("markers", "hri: a hritest scenario test (a failure corpus entry or a test using "
+                                       "the hri_scenario fixture)")
+    given = config.getoption("hri_corpus", None)
+    try:
+        corpus = (config.rootpath / given) if given else hc.default_corpus(config.rootpath)
+    except hc.CorpusError as exc:
+        raise pytest.UsageError(str(exc)) from None
+    config.stash[_corpus_key] = corpus = corpus.resolve()
+    config.stash[_domains_key] = {}
+    config.pluginmanager.register(_Summary(config), "hritest-summary")
+    # A corpus outside the paths pytest collects (testpaths, say) is still replayed when no path was
+    # given, or when --hri-corpus names it.
+    explicit = config.args_source == pytest.Config.ArgsSource.ARGS
+    if corpus.is_dir() and (given or not explicit) and not _covered(corpus, config):
+        config.args.append(str(corpus))
+
+
+def _covered(corpus: Path, config: pytest.Config) -> bool:
+    for arg in config.args:
+        path = Path(config.invocation_params.dir, arg.split("::")[0]).resolve()
+        if path == corpus or path in corpus.parents:
+            return True
+    return False
+
+
+def pytest_report_header(config: pytest.Config) -> str | None:
+    corpus = config.stash.get(_corpus_key, None)
+    if corpus is None or not corpus.is_dir():
+        return None
+    count = len(hc.entry_files(corpus))
+    return f"hritest: failure corpus {_shown(corpus, config)} ({count} entr{'y' if count == 1 else 'ies'})"
+
+
+def _shown(path: Path, config: pytest.Config) -> str:
+    try:
+        return str(path.relative_to(config.rootpath))
+    except ValueError:
+        return str(path)
+
+
+# --- collection ---------------------------------------------------------------------------------
+
+
+def pytest_collect_file(file_path: Path, parent: pytest.Collector) -> pytest.Collector | None:
+    corpus = parent.config.stash.get(_corpus_key, None)
+    if corpus is not None and file_path.suffix == ".yaml" and file_path.resolve().parent.parent == corpus:
+        return CorpusFile.from_parent(parent, path=file_path)
+    return None
+
+
+class CorpusFile(pytest.File):
+    """One corpus file; a malformed one is a collection error naming the file and the field."""
+
+    def collect(self) -> Iterator[pytest.Collector]:
+        try:
+            entry = hc.load_entry(self.path)
+        except hc.CorpusError as exc:
+            raise self.CollectError(f"hritest corpus: {exc}") from None
+        yield CorpusSpec.from_parent(self, name=entry.spec_name, entry=entry)
+
+
+class CorpusSpec(pytest.Collector):
+    """The spec level of ``<file>::<spec>::<id>``, so that ``-k <spec>`` and node ids both work."""
+
+    def __init__(self, *, entry: hc.Entry, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.entry = entry
+
+    def collect(self) -> Iterator[pytest.Item]:
+        yield CorpusItem.from_parent(self, name=self.entry.id, entry=self.entry)
+
+
+class HriRegression(Exception):
+    """A failure marked fixed that fails again (or an entry that no longer evaluates)."""
+
+
+class CorpusItem(pytest.Item):
+    """One stored failure, re-simulated and judged by the spec's failure condition."""
+
+    def __init__(self, *, entry: hc.Entry, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.entry = entry
+        self.add_marker("hri")
+        self.hri_outcome = ""  # set by runtest: one of OUTCOMES
+        self.hri_section = ""  # the report's "hritest" section
+
+    def runtest(self) -> None:
+        entry = self.entry
+        self.user_properties.append(("hri_entry", f"{entry.spec_name}/{entry.id}"))
+        stale = _stale_reason(entry, self.config)
+        if stale:
+            self._set("stale", stale)
+            pytest.skip(f"hritest stale: {stale}")
+        domain = _domain(self.config, entry.spec_path)
+        replayed = _replay(domain, entry)
+        evaluation = replayed.evaluation
+        then_now = _then_now(replayed)
+        if not evaluation.ok:
+            self._set("error", f"the scenario no longer evaluates: status {evaluation.status}")
+            raise HriRegression(f"{self._title()} no longer evaluates: status {evaluation.status}\n"
+                                f"{evaluation.message}\n{then_now}")
+        condition = domain.spec.failure
+        if evaluation.failure and entry.status == "fixed":
+            self._set("regression", "")
+            raise HriRegression(f"{self._title()} was marked fixed but fails again: '{condition}' holds\n{then_now}")
+        if evaluation.failure:
+            self._set("still failing", then_now)
+            pytest.xfail(f"hritest open failure still fails: '{condition}' holds "
+                         f"(objective {evaluation.objective:.6g}, recorded {entry.objective:.6g})")
+        if entry.status == "fixed":
+            self._set("passing", "")
+            return
+        text = (f"open failure {entry.spec_name}/{entry.id} no longer fails: '{condition}' does not hold\n"
+                f"{then_now}\n")
+        if self.config.getoption("hri_mark_fixed"):
+            hc.set_status(entry.path, "fixed")
+            text += f"marked fixed in {entry.path} (--hri-mark-fixed)"
+        else:
+            text += (f"mark it fixed: hritest promote --to {_shown(entry.path.parent.parent, self.config)} "
+                     f"--mark-fixed {entry.spec_name}/{entry.id}   (or run pytest with --hri-mark-fixed)")
+        self._set("now passing", text)
+
+    def _set(self, outcome: str, section: str) -> None:
+        self.hri_outcome, self.hri_section = outcome, section
+        self.user_properties.append(("hri_outcome", outcome))
+
+    def _title(self) -> str:
+        return f"hritest {self.entry.spec_name}/{self.entry.id}"
+
+    def repr_failure(self, excinfo: pytest.ExceptionInfo[BaseException], style: Any = None) -> Any:
+        if isinstance(excinfo.value, HriRegression):
+            entry = self.entry
+            theta = ",".join(repr(v) for v in entry.theta.values())
+            return (f"{excinfo.value}\ncorpus file: {_shown(entry.path, self.config)}\n"
+                    f"replay it: hritest replay {_shown(entry.spec_path, self.config)} --seed {entry.seed} "
+                    f"--theta {theta}")
+        if isinstance(excinfo.value, HritestError):
+            return f"{self._title()}: {excinfo.value}"
+        return super().repr_failure(excinfo)
+
+    def reportinfo(self) -> tuple[os.PathLike[str] | str, int | None, str]:
+        return self.path, None, f"hri {self.entry.spec_name}::{self.entry.id} ({self.entry.status})"
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    for item in items:
+        if "hri_scenario" in getattr(item, "fixturenames", ()):
+            item.add_marker("hri")
+    _select_specs(config, items)
+    _add_searches(config, items)
+
+
+def _select_specs(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """With ``--hri-spec``: deselects the corpus entries of every other spec."""
+    wanted = config.getoption("hri_spec")
+    if not wanted:
+        return
+    files = {Path(config.invocation_params.dir, w).resolve() for w in wanted if w.endswith((".yaml", ".yml"))}
+    keep, drop = [], []
+    for item in items:
+        if isinstance(item, CorpusItem) and not (item.entry.spec_name in wanted or item.entry.spec_path in files):
+            drop.append(item)
+        else:
+            keep.append(item)
+    if drop:
+        config.hook.pytest_deselected(items=drop)
+        items[:] = keep
+
+
+def _add_searches(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """With ``--hri-search-budget``: one :class:`SearchItem` per spec, after that spec's entries."""
+    budget = config.getoption("hri_search_budget")
+    if budget <= 0:
+        return
+    by_spec: dict[Path, list[CorpusItem]] = {}
+    for item in items:
+        if isinstance(item, CorpusItem):
+            by_spec.setdefault(item.entry.spec_path, []).append(item)
+    for spec, entries in by_spec.items():
+        last = items.index(entries[-1])
+        folder = entries[0].parent.parent.parent  # the corpus's <spec> folder
+        search = SearchItem.from_parent(folder, name="search", spec=spec, entries=entries, budget=budget)
+        items.insert(last + 1, search)
+
+
+class SearchItem(pytest.Item):
+    """A short Random search of one spec: fails when it finds a failure the corpus does not hold."""
+
+    def __init__(self, *, spec: Path, entries: list[CorpusItem], budget: int, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.spec, self.budget = spec, budget
+        self.spec_name = entries[0].entry.spec_name
+        self.held = {e.entry.scenario_digest or e.entry.id for e in entries}
+        self.add_marker("hri")
+
+    def runtest(self) -> None:
+        import shutil
+
+        from hritest import search as qd
+        from hritest.replay import scenario_digest
+
+        if not self.spec.is_file():
+            pytest.skip(f"hritest: its spec {_shown(self.spec, self.config)} no longer exists")
+        run = _search_folder(self.config) / self.spec_name
+        shutil.rmtree(run, ignore_errors=True)
+        found = qd.start(spec_file=self.spec, out=run, algorithm="random", budget=self.budget, seed=None,
+                         backend=qd.Backend(workers=os.cpu_count() or 1))
+        spec_digest = found.run_dir.meta["spec_digest"]
+        new = []
+        for record in found.failures():
+            digest = scenario_digest(spec_digest, record["theta_repaired"], record["seed"])
+            if digest not in self.held and digest[:12] not in self.held:
+                new.append((digest[:12], record))
+        if new:
+            self.user_properties += [("hri_entry", f"{self.spec_name}/search"),
+                                     ("hri_outcome", "search with new failures")]
+            names = [m.name for m in found.domain.measures]
+            lines = [f"  {d}  objective {r['objective']:.6g}  "
+                     + "  ".join(f"{n} {v:.4g}" for n, v in zip(names, r["measures"])) for d, r in new]
+            raise HriRegression(
+                f"a Random search of {self.budget} evaluations found {len(new)} failure(s) of {self.spec_name} "
+                f"that the corpus does not hold:\n" + "\n".join(lines) +
+                f"\nkeep them: hritest promote {_shown(run, self.config)} "
+                f"--to {_shown(self.path.parent, self.config)}")
+
+    def repr_failure(self, excinfo: pytest.ExceptionInfo[BaseException], style: Any = None) -> Any:
+        if isinstance(excinfo.value, HriRegression | HritestError):
+            return str(excinfo.value)
+        return super().repr_failure(excinfo)
+
+    def reportinfo(self) -> tuple[os.PathLike[str] | str, int | None, str]:
+        return self.path, None, f"hri search {self.spec_name} (budget {self.budget})"
+
+
+def _search_folder(config: pytest.Config) -> Path:
+    """Where searches leave their run directories: pytest's cache folder, so one can promote from them."""
+    cache = getattr(config, "cache", None)
+    if cache is not None:
+        return cache.mkdir("hritest-search")
+    import tempfile
+
+    return Path(tempfile.mkdtemp(prefix="hritest-search-"))
+
+
+# --- replay -------------------------------------------------------------------------------------
+
+
+def _stale_reason(entry: hc.Entry, config: pytest.Config) -> str:
+    from hritest.rundir import digest
+
+    spec, path = _shown(entry.spec_path, config), _shown(entry.path, config)
+    if not entry.spec_path.is_file():
+        return f"its spec {spec} no longer exists; restore it, or delete {path}"
+    now = digest(entry.spec_path)
+    if now != entry.spec_digest:
+        return (f"{spec} changed since {entry.spec_name}/{entry.id} was recorded (spec digest "
+                f"{entry.spec_digest[:12]} then, {now[:12]} now); search again and promote, or delete {path}")
+    return ""
+
+
+def _domain(config: pytest.Config, spec: Path) -> Any:
+    """The compiled spec, once per spec per session (a spec that does not compile fails each of its tests)."""
+    cache = config.stash[_domains_key]
+    if spec not in cache:
+        from hritest.domain import compile_spec
+        from hritest.spec import load_spec
+
+        try:
+            cache[spec] = compile_spec(load_spec(spec))
+        except HritestError as exc:
+            cache[spec] = exc
+    found = cache[spec]
+    if isinstance(found, Exception):
+        raise found
+    return found
+
+
+def _replay(domain: Any, entry: hc.Entry) -> Any:
+    from hritest.replay import replay_record
+
+    labels = list(domain.space.labels)
+    if list(entry.theta) != labels:
+        raise HritestError(f"{entry.path}: field 'theta' has components {', '.join(entry.theta)}, but "
+                           f"{entry.spec_name}'s theta is {', '.join(labels)}")
+    record = {"index": entry.id, "theta": list(entry.theta.values()), "seed": entry.seed, "status": "ok",
+              "failure": True, "objective": entry.objective,
+              "measures": [entry.measures.get(m.name) for m in domain.measures]}
+    return replay_record(domain, record, spec_digest=entry.spec_digest)
+
+
+def _then_now(replayed: Any) -> str:
+    def show(value: Any) -> str:
+        return f"{value:.6g}" if isinstance(value, float) else str(value)
+
+    rows = [(c.name, show(c.stored), show(c.replayed)) for c in replayed.checks if c.name != "status"]
+    width = max(len(r[0]) for r in rows)
+    lines = [f"  {'':{width}}  {'recorded':>12}  {'now':>12}"]
+    lines += [f"  {name:{width}}  {then:>12}  {now:>12}" for name, then, now in rows]
+    return "\n".join(lines)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Any:
+    report = yield
+    if isinstance(item, CorpusItem) and call.when == "call" and item.hri_outcome:
+        if item.hri_section:
+            report.sections.append(("hritest", item.hri_section))
+        if item.hri_outcome == "stale" and report.skipped and isinstance(report.longrepr, tuple):
+            report.longrepr = (str(item.path), None, report.longrepr[2])  # the entry's file, not this module
+        if item.hri_outcome == "now passing" and report.passed:
+            report.wasxfail = f"hritest open failure no longer fails ({item.entry.path.name})"
+    return report
+
+
+# --- summary ------------------------------------------------------------------------------------
+
+
+class _Summary:
+    """Counts the corpus tests' outcomes from their reports (so it also works under pytest-xdist)
+    and writes the ``hritest`` section of the terminal summary. One per pytest config."""
+
+    def __init__(self, config: pytest.Config) -> None:
+        self.config = config
+        self.results: dict[str, list[tuple[str, str]]] = {}
+
+    def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
+        props = dict(report.user_properties)
+        if report.when != "call" or "hri_entry" not in props:
+            return
+        outcome = props.get("hri_outcome") or ("error" if report.failed else "")
+        if outcome:
+            self.results.setdefault(outcome, []).append((props["hri_entry"], report.nodeid))
+
+    def pytest_terminal_summary(self, terminalreporter: Any) -> None:
+        results, config, tr = self.results, self.config, terminalreporter
+        if not results:
+            return
+        corpus = _shown(config.stash[_corpus_key], config)
+        tr.ensure_newline()
+        tr.section("hritest")
+        counts = [_count(len(results.get(o, [])), o) for o in OUTCOMES[:4]]
+        counts += [_count(len(results[o]), o) for o in OUTCOMES[4:] if results.get(o)]
+        tr.write_line(f"corpus {corpus}: {', '.join(counts)}")
+        for entry, nodeid in results.get("regression", []):
+            tr.write_line(f"REGRESSION  {entry}  ({nodeid})")
+        for entry, nodeid in results.get("error", []):
+            tr.write_line(f"ERROR       {entry}  ({nodeid})")
+        for entry, nodeid in results.get("search with new failures", []):
+            tr.write_line(f"NEW         {entry}  (failures the corpus does not hold; {nodeid})")
+        passing = results.get("now passing", [])
+        if passing:
+            done = config.getoption("hri_mark_fixed")
+            tr.write_line("now passing (open failures that no longer fail" + (", marked fixed):" if done else "):"))
+            for entry, nodeid in passing:
+                tr.write_line(f"  {entry}  ({nodeid})")
+            if not done:
+                ids = " ".join(f"--mark-fixed {entry}" for entry, _ in passing)
+                tr.write_line(f"mark them fixed: hritest promote --to {corpus} {ids}")
+                tr.write_line("            or: pytest --hri-mark-fixed")
+        for entry, nodeid in results.get("stale", []):
+            tr.write_line(f"stale       {entry}  (its spec changed or is gone; {nodeid})")
+
+
+def _count(n: int, outcome: str) -> str:
+    return f"{n} {outcome}s" if outcome in ("regression", "error") and n != 1 else f"{n} {outcome}"
+
+
+# --- the fixture for users' own tests ----------------------------------------------------------
+
+
+@pytest.fixture
+def hri_scenario(request: pytest.FixtureRequest) -> Callable[..., tuple[Any, Any]]:
+    """A factory that simulates one scenario: ``evaluation, rollout = hri_scenario(spec, theta, seed=0)``.
+
+    ``spec`` is a spec file (relative paths from the rootdir); ``theta`` the raw scenario parameters,
+    a sequence in the order ``hritest show`` lists or a mapping from those labels to values. Returns
+    the :class:`hritest.evaluate.Evaluation` (``status``, ``objective``, ``measures``, ``metrics``,
+    ``failure``) and the Rollout (None when the scenario did not simulate). Specs compile once per
+    session::
+
+        def test_goals_stay_apart(hri_scenario):
+            evaluation, rollout = hri_scenario("specs/teleop.yaml", [0.6, 0.05, 0.6, 0.1, 0, 0, 0, 0, 0])
+            assert rollout.metrics["min_goal_distance"] > 0.05
+    """
+    config = request.config
+
+    def simulate(spec: str | os.PathLike[str], theta: Sequence[float] | Mapping[str, float], seed: int = 0):
+        import numpy as np
+
+        from hritest.evaluate import evaluate_with_rollout
+
+        domain = _domain(config, (config.rootpath / spec).resolve())
+        labels = list(domain.space.labels)
+        if isinstance(theta, Mapping):
+            missing = [label for label in labels if label not in theta]
+            extra = [key for key in theta if key not in labels]
+            if missing or extra:
+                raise ValueError(f"hri_scenario: theta for {spec} needs exactly {', '.join(labels)}; "
+                                 f"missing {missing or 'none'}, unknown {extra or 'none'}")
+            theta = [theta[label] for label in labels]
+        values = np.asarray(theta, dtype=float)
+        if values.shape != (len(labels),):
+            raise ValueError(f"hri_scenario: {spec} needs {len(labels)} theta values ({', '.join(labels)}), "
+                             f"got {values.size}")
+        return evaluate_with_rollout(domain, values, seed=seed)
+
+    return simulate
