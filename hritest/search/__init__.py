@@ -38,7 +38,8 @@ class Backend:
                              timeout=self.timeout)
         client = _dask_client(self.cluster)
         workers = max(1, sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()))
-        return Evaluator(ref=ref, make_executor=client.get_executor, workers=workers, timeout=self.timeout)
+        return Evaluator(ref=ref, make_executor=client.get_executor, workers=workers, timeout=self.timeout,
+                         on_close=client.close)
 
 
 def _dask_client(address: str):  # noqa: ANN202 - distributed.Client

@@ -113,12 +113,14 @@ class Evaluator:
     """
 
     def __init__(self, *, ref: DomainRef, make_executor: Callable[[], cf.Executor], workers: int,
-                 timeout: float) -> None:
+                 timeout: float, on_close: Callable[[], None] = lambda: None) -> None:
         self.ref, self.make_executor, self.workers, self.timeout = ref, make_executor, workers, timeout
+        self.on_close = on_close
         self.executor = make_executor()
 
     def close(self) -> None:
-        self.executor.shutdown(wait=False, cancel_futures=True)
+        _shutdown(self.executor)
+        self.on_close()
 
     def run(self, jobs: Iterable[Job], on_result: Callable[[Job, Evaluation], None]) -> None:
         """Evaluates every job, calling ``on_result`` for each as it finishes (in any order)."""
@@ -171,7 +173,7 @@ class Evaluator:
 
     def _restart(self, running: dict) -> None:
         running.clear()
-        self.executor.shutdown(wait=False, cancel_futures=True)
+        _shutdown(self.executor)
         self.executor = self.make_executor()
 
     def _retry_or_report(self, job: Job, attempts: dict[int, int], again: list[Job],
@@ -192,6 +194,13 @@ class Evaluator:
         for process in getattr(self.executor, "_processes", {}).values():
             process.kill()
         return True
+
+
+def _shutdown(executor: cf.Executor) -> None:
+    try:
+        executor.shutdown(wait=False, cancel_futures=True)
+    except TypeError:  # Dask's ClientExecutor predates cancel_futures
+        executor.shutdown(wait=False)
 
 
 def _note_retry(evaluation: Evaluation, attempts: int) -> Evaluation:
