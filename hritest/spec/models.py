@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, PrivateAttr, StringConstraints, field_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, PrivateAttr, StringConstraints
 
 from hritest.spec import expr
 
@@ -31,6 +31,15 @@ Interval = Annotated[tuple[float, float], AfterValidator(_check_interval)]
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
 PositiveFloat = Annotated[float, Field(gt=0)]
+
+
+def _check_half_size(value: Vec3) -> Vec3:
+    if min(value) <= 0:
+        raise ValueError(f"every half size must be positive, got {list(value)}")
+    return value
+
+
+HalfSize = Annotated[Vec3, AfterValidator(_check_half_size)]
 PositiveInt = Annotated[int, Field(gt=0)]
 
 
@@ -65,14 +74,7 @@ class TaskSpec(Strict):
 
 class BoxSpec(Strict):
     center: Vec3
-    half_size: Vec3
-
-    @field_validator("half_size")
-    @classmethod
-    def _positive(cls, value: Vec3) -> Vec3:
-        if min(value) <= 0:
-            raise ValueError(f"every half size must be positive, got {list(value)}")
-        return value
+    half_size: HalfSize
 
 
 class RegionSpec(Strict):
@@ -92,15 +94,8 @@ class ObjectSpec(Strict):
     """A goal object: a box, at a nominal position that parameters may move in x and y."""
 
     name: Name
-    half_size: Vec3
+    half_size: HalfSize
     position: Vec3
-
-    @field_validator("half_size")
-    @classmethod
-    def _positive(cls, value: Vec3) -> Vec3:
-        if min(value) <= 0:
-            raise ValueError(f"every half size must be positive, got {list(value)}")
-        return value
 
 
 class ParameterSpec(Strict):

@@ -61,6 +61,9 @@ def test_the_toy_spec_loads_and_compiles(toy_spec):
          ["duplicate name 'goal_distance'"]),
         # A measure with lo >= hi written as equal ends.
         ("range: [0, 0.087]", "range: [0.087, 0.087]", "measures[1].range", "0.087, 0.087", ["lower end"]),
+        # A box that is not a box.
+        ("{name: goal0, half_size: [0.032, 0.032, 0.032]", "{name: goal0, half_size: [0.032, -0.032, 0.032]",
+         "objects[0].half_size", "-0.032", ["every half size must be positive"]),
         # Unknown constraint type.
         ("- {type: bounds,", "- {type: fence,", "constraints[0]", "type: fence", ["inside", "no_overlap"]),
     ],
