@@ -25,7 +25,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from hritest import metrics
 from hritest.protocols import Rollout
-from hritest.sim import World
+from hritest.sim import shared_world
 from hritest_plugins import hindsight, scene
 
 HAND_HEIGHT = 0.96
@@ -83,19 +83,23 @@ class CollaborationTask:
         self.dt = spec.task.dt
         self.ticks = int(round(spec.task.time_limit / self.dt))
         self.start = np.array([*params.human_start, HAND_HEIGHT])
-        self.world = World(layout=scene.world_layout(spec, scenario, hand_start=tuple(self.start)))
+        self.layout = scene.world_layout(spec, scenario, hand_start=tuple(self.start))
 
     def _ticks(self, seconds: float) -> int:
         return int(round(seconds / self.dt))
 
     def run(self, *, robot: Any, human: Any, rng: np.random.Generator) -> Rollout:
-        p, world = self.params, self.world
-        world.reset()
+        p, world = self.params, shared_world(self.layout)
         targets = scene.goal_targets(self.scenario, self.names)
         goals = np.array([self.scenario.objects[n] for n in self.names], dtype=float)
+        # Per goal, computed once: the robot's at-goal check and the human's other boxes.
+        robot_checks = [hindsight.prepare_targets(goal_targets) for goal_targets in targets]
+        others = [np.delete(goals, goal, axis=0) for goal in range(len(goals))]
         start_q = world.q
         home = start_q.copy()
         hand = self.start.copy()
+        hand_pose = np.eye(4)
+        hand_pose[:3, :3] = hindsight.GOAL_ROTATION
         h, r = _Agent("moving"), _Agent("moving")
         blocked: dict[int, str] = {}
         record = _Record()
@@ -110,12 +114,11 @@ class CollaborationTask:
             velocity = np.zeros(3)
             if h.state == "moving":
                 goal = self.order[len(h.done_goals)]
-                if np.linalg.norm(hand[:2] - goals[goal, :2]) < p.position_tolerance:
+                if math.hypot(*(hand[:2] - goals[goal, :2]).tolist()) < p.position_tolerance:
                     h.state, h.goal = "waiting", goal
                 else:
-                    others = np.delete(goals, goal, axis=0)
                     velocity = scene.checked(human.act({"hand_position": hand, "goal_position": goals[goal],
-                                                        "other_goals": others}), who_h, (3,))
+                                                        "other_goals": others[goal]}), who_h, (3,))
             if h.state == "waiting":
                 if h.goal in blocked:
                     h.wait += self.dt
@@ -139,8 +142,8 @@ class CollaborationTask:
 
             # Robot: it acts every tick, so its belief is tracked throughout; it moves when "moving".
             pose = world.ee_pose()
-            hand_pose = np.eye(4)
-            hand_pose[:3, :3], hand_pose[:3, 3] = hindsight.GOAL_ROTATION, hand
+            hand_pose = hand_pose.copy()  # a new array each tick: a robot may keep what it is given
+            hand_pose[:3, 3] = hand
             action = robot.act({"ee_pose": pose, "hand_pose": hand_pose, "hand_velocity": velocity,
                                 "goal_targets": targets, "visited": tuple(r.done_goals),
                                 "reset": idle or r.state == "idle"})
@@ -148,11 +151,13 @@ class CollaborationTask:
             # Wrong-goal probability counts while the human heads for its goal: between goals the
             # belief still (rightly) names the box just finished, which says nothing of inference.
             human_goal = self.order[len(h.done_goals)] if h.state == "moving" else None
-            record.tick(t, world, hand, h.state, r.state, action.belief, human_goal)
+            record.tick(pose, world.q, hand, h.state, r.state, action.belief, human_goal)
+            # A pause entered on this tick (a replan) starts counting down on the next, like work.
+            counting = r.state in ("working", "resetting", "replanning")
             if r.state == "moving":
                 reached = [g for g in range(len(goals)) if g not in r.done_goals
                            and (action.goal is None or action.goal == g)
-                           and scene.at_goal(pose, targets[g], distance=p.position_tolerance,
+                           and scene.at_goal(pose, robot_checks[g], distance=p.position_tolerance,
                                              angle=p.angle_tolerance)]
                 if reached:
                     r.state, r.goal = "waiting", reached[0]
@@ -170,7 +175,7 @@ class CollaborationTask:
                 else:
                     blocked[r.goal], r.state, r.timer = "robot", "working", self._ticks(p.robot_work_time)
                     record.event(t, f"robot starts work on {self.names[r.goal]}")
-            elif r.state in ("working", "resetting", "replanning"):
+            elif counting:
                 r.timer -= 1
                 if r.timer <= 0:
                     if r.state == "working":
@@ -201,7 +206,8 @@ class _Record:
     """Per-tick arrays of one episode, turned into a :class:`Rollout` at the end."""
 
     def __init__(self) -> None:
-        self.ee, self.joints, self.hand, self.beliefs, self.wrong = [], [], [], [], []
+        self.ee, self.joints, self.hand, self.beliefs = [], [], [], []
+        self.human_goals: list[int] = []  # per belief: the human's goal, -1 while it has none
         self.states: dict[str, list[str]] = {"human": [], "robot": []}
         self.events: list[tuple[float, str]] = []
         self.replans = 0
@@ -209,18 +215,26 @@ class _Record:
     def event(self, t: float, text: str) -> None:
         self.events.append((t, text))
 
-    def tick(self, t: float, world: World, hand: np.ndarray, human_state: str, robot_state: str,
-             belief: np.ndarray | None, human_goal: int | None) -> None:
-        self.ee.append(world.ee_pose()[:3, 3].copy())
-        self.joints.append(world.q)
+    def tick(self, ee_pose: np.ndarray, joints: np.ndarray, hand: np.ndarray, human_state: str,
+             robot_state: str, belief: np.ndarray | None, human_goal: int | None) -> None:
+        self.ee.append(ee_pose[:3, 3].copy())
+        self.joints.append(joints)
         self.hand.append(hand.copy())
         self.states["human"].append(human_state)
         self.states["robot"].append(robot_state)
         if belief is not None:
-            belief = np.asarray(belief, dtype=float)
-            self.beliefs.append(belief)
-            if human_goal is not None:
-                self.wrong.append(float(np.delete(belief, human_goal).max()))
+            self.beliefs.append(np.asarray(belief, dtype=float))
+            self.human_goals.append(-1 if human_goal is None else human_goal)
+
+    def max_wrong_goal_probability(self) -> float:
+        """The highest belief in any goal but the human's, over the ticks the human had a goal."""
+        goals = np.array(self.human_goals, dtype=int)
+        heading = goals >= 0
+        if not heading.any():
+            return 0.0
+        beliefs = np.array(self.beliefs)[heading]
+        own = np.arange(beliefs.shape[1]) == goals[heading, None]
+        return float(np.where(own, -np.inf, beliefs).max())
 
     def rollout(self, task: CollaborationTask, completion: float, goals: np.ndarray, human_wait: float,
                 robot_wait: float, finished: bool) -> Rollout:
@@ -229,7 +243,7 @@ class _Record:
         values = {
             "completion_time": completion,
             "min_goal_distance": metrics.min_pairwise_distance(goals[:, :2]),
-            "max_wrong_goal_probability": max(self.wrong, default=0.0),
+            "max_wrong_goal_probability": self.max_wrong_goal_probability(),
             # Includes the jumps of the robot's resets, as the reference's measure does.
             "robot_path_length": metrics.path_length(ee),
             "human_path_length": metrics.path_length(hand),

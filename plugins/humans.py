@@ -76,15 +76,16 @@ class MdpHuman:
     def act(self, observation: dict[str, Any]) -> np.ndarray:
         goal = np.asarray(observation["goal_position"], dtype=float)
         hand = np.asarray(observation["hand_position"], dtype=float)
-        table = self._table(goal, np.asarray(observation["other_goals"], dtype=float).reshape(-1, 3)[:, :2])
+        table = self._table(goal, observation["other_goals"])
         target = mdp_human.next_target(table, hand, goal, rng=self.rng)
         velocity = np.zeros(3)
         velocity[:2] = teleop_human.user_velocity(hand, target) * self.params.speed
         return velocity
 
-    def _table(self, goal: np.ndarray, others: np.ndarray) -> mdp_human.ValueTable:
+    def _table(self, goal: np.ndarray, other_goals: Any) -> mdp_human.ValueTable:
         key = (float(goal[0]), float(goal[1]))
         if key not in self.tables:
+            others = np.asarray(other_goals, dtype=float).reshape(-1, 3)[:, :2]
             obstacles = mdp_human.obstacle_mask(self.grid, other_goals_xy=others)
             self.tables[key] = mdp_human.soft_value_iteration(
                 self.grid, obstacles, tuple(self.grid.cell_of(goal)), tau=10.0 ** self.params.log10_rationality)

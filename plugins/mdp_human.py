@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -32,6 +33,7 @@ HUMAN_START_XY = (0.91, 0.05)
 
 #: The 8 moves (dx, dy) in the reference's order, which fixes how argmax breaks ties.
 MOVES = np.array([[-1, -1], [-1, 0], [-1, 1], [0, 1], [1, 1], [1, 0], [1, -1], [0, -1]])
+_MOVE_LIST = MOVES.tolist()  # the same, for plain-int arithmetic on one cell
 STEP_REWARD = -0.01
 OBSTACLE_REWARD = -1.0
 GOAL_VALUE = 1.0
@@ -71,7 +73,8 @@ class GridSpec:
                     f"extent [{lo}, {hi}] must be a positive whole number of {self.cell} m cells"
                 )
 
-    @property
+    # Cached: the human locates itself on the grid every tick.
+    @cached_property
     def shape(self) -> tuple[int, int]:
         """Number of cells along x and y."""
         return (
@@ -79,10 +82,14 @@ class GridSpec:
             round((self.y_max - self.y_min) / self.cell),
         )
 
-    @property
+    @cached_property
     def origin(self) -> np.ndarray:
         """The grid's lower-left corner ``(x_min, y_min)``."""
-        return np.array([self.x_min, self.y_min])
+        return _frozen(np.array([self.x_min, self.y_min]))
+
+    @cached_property
+    def _last_cell(self) -> np.ndarray:
+        return _frozen(np.array(self.shape) - 1)
 
     def cell_of(self, xy: ArrayLike) -> np.ndarray:
         """Integer cell ``(ix, iy)`` holding each point, clamped to the grid.
@@ -93,7 +100,7 @@ class GridSpec:
         """
         xy = np.asarray(xy, dtype=np.float64)[..., :2]
         index = np.floor((xy - self.origin) / self.cell + 1e-6).astype(np.intp)
-        return np.clip(index, 0, np.array(self.shape) - 1)
+        return np.minimum(np.maximum(index, 0), self._last_cell)
 
     def centre_of(self, cells: ArrayLike) -> np.ndarray:
         """x-y of the centre of each integer cell ``(..., 2)``."""
@@ -312,15 +319,16 @@ def next_target(
         ``(2,)`` target x-y.
     """
     grid = table.grid
-    cell = tuple(grid.cell_of(position_xy))
+    cell = tuple(grid.cell_of(position_xy).tolist())
     if cell == table.goal_cell:
         return np.asarray(goal_xy, dtype=np.float64)[:2].copy()
     if rng is None:
         move = table.best_action[cell]
     else:
         move = rng.choice(len(MOVES), p=_softmax(table.tau * table.q_values[cell]))
-    nxt = np.clip(np.add(cell, MOVES[move]), 0, np.array(grid.shape) - 1)
-    if tuple(nxt) == table.goal_cell:
+    (dx, dy), (nx, ny) = _MOVE_LIST[move], grid.shape
+    nxt = (min(max(cell[0] + dx, 0), nx - 1), min(max(cell[1] + dy, 0), ny - 1))
+    if nxt == table.goal_cell:
         return np.asarray(goal_xy, dtype=np.float64)[:2].copy()
     return grid.centre_of(nxt)
 

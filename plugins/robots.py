@@ -2,6 +2,9 @@
 
 Each class wraps the math of :mod:`hritest_plugins.hindsight` with the per-episode state (the
 belief) and reads only the observation its task gives it.
+
+The goal targets arrive every tick; the robots prepare them (:func:`hindsight.prepare_targets`)
+once per array a task hands them. Tasks build that array once per episode, read-only.
 """
 
 from __future__ import annotations
@@ -36,18 +39,21 @@ class HindsightRobot:
     def __init__(self, *, params: _Params, scenario: Any, rng: np.random.Generator) -> None:
         self.params = params
         self.log_belief: np.ndarray | None = None
+        self.targets = _PreparedTargets()
 
     def act(self, observation: dict[str, Any]) -> RobotAction:
-        pose, user, targets = observation["ee_pose"], observation["user_twist"], observation["goal_targets"]
+        pose, user = observation["ee_pose"], np.asarray(observation["user_twist"], dtype=float)
+        targets = self.targets.of(observation["goal_targets"])
         if self.log_belief is None:
-            self.log_belief = hindsight.uniform_log_belief(len(targets))
-        values, q_values, _ = hindsight.goal_values(pose, user, targets)
+            self.log_belief = hindsight.uniform_log_belief(targets.shape[0])
+        look = hindsight.lookahead(pose, user, targets)
+        values, q_values, _ = look.per_goal()
         self.log_belief = hindsight.update_belief(self.log_belief, values, q_values,
                                                   max_prob=self.params.max_probability)
         belief = np.exp(self.log_belief)
-        after = hindsight.apply_twist(pose, user, hindsight.DEFAULT_CONSTANTS.action_apply_time)
-        actions = _goal_actions(after, targets)
-        return RobotAction(twist=self.combine(belief, actions, user), belief=belief, goal=int(np.argmax(belief)))
+        # The reference's actions start from the pose the user's twist leads to.
+        actions = hindsight.goal_actions(look.after, look.values_after, targets.shape[-1])
+        return RobotAction(twist=self.combine(belief, actions, user), belief=belief, goal=int(belief.argmax()))
 
     def combine(self, belief: np.ndarray, actions: np.ndarray, user: np.ndarray) -> np.ndarray:
         """The twist sent to the arm: the belief-weighted average action plus the user's twist."""
@@ -103,27 +109,73 @@ class CollabRobot:
     def __init__(self, *, params: _CollabParams, scenario: Any, rng: np.random.Generator) -> None:
         self.params = params
         self.log_belief: np.ndarray | None = None
+        self.targets = _PreparedTargets()
+        self.hand_values = _LastResult(_hand_values)
+        self.plan = _LastResult(_plan)
 
     def act(self, observation: dict[str, Any]) -> RobotAction:
-        targets = observation["goal_targets"]
+        targets = self.targets.of(observation["goal_targets"])
         if self.log_belief is None or observation.get("reset", False):
-            self.log_belief = hindsight.uniform_log_belief(len(targets))
+            self.log_belief = hindsight.uniform_log_belief(targets.shape[0])
         if observation.get("infer", True):
             twist = np.zeros(6)
             twist[:3] = self.params.inference_twist_scale * np.asarray(observation["hand_velocity"])
-            values, q_values, _ = hindsight.goal_values(observation["hand_pose"], twist, targets)
+            values, q_values = self.hand_values(targets, np.asarray(observation["hand_pose"], dtype=float), twist)
             self.log_belief = hindsight.update_belief(self.log_belief, values, q_values,
                                                       max_prob=self.params.max_probability)
         belief = np.exp(self.log_belief)
-        pose = observation["ee_pose"]
-        robot_values, _, _ = hindsight.goal_values(pose, np.zeros(6), targets)
-        mapping = hindsight.feasible_goal_mapping(robot_values, observation.get("visited", ()))
-        twist = hindsight.assisted_twist_collab(belief, _goal_actions(pose, targets), mapping)
-        return RobotAction(twist=twist, belief=belief, goal=int(mapping[np.argmax(belief)]))
+        mapping, actions = self.plan(targets, np.asarray(observation["ee_pose"], dtype=float),
+                                     tuple(observation.get("visited", ())))
+        twist = hindsight.belief_weighted_mean(belief, actions)
+        return RobotAction(twist=twist, belief=belief, goal=mapping[int(belief.argmax())])
 
 
-def _goal_actions(pose: np.ndarray, targets: np.ndarray) -> np.ndarray:
-    """Per goal, the action toward its target of lowest value from ``pose``."""
-    _, _, best = hindsight.goal_values(pose, np.zeros(6), targets)
-    chosen = targets[np.arange(len(targets)), best]
-    return hindsight.target_action(pose, chosen)
+def _hand_values(targets: hindsight.Targets, hand_pose: np.ndarray, twist: np.ndarray) -> tuple[list, list]:
+    """Goal-level V and Q of the hand's motion, for the belief update."""
+    values, q_values, _ = hindsight.lookahead(hand_pose, twist, targets).per_goal()
+    return values, q_values
+
+
+def _plan(targets: hindsight.Targets, ee_pose: np.ndarray, visited: tuple[int, ...]) -> tuple[list, np.ndarray]:
+    """The feasible-goal mapping from the robot's values and, per candidate human goal, the
+    action toward the goal mapped to it (:func:`hindsight.mapped_actions`)."""
+    per = targets.shape[-1]
+    towards = hindsight.offsets(ee_pose, targets)
+    values = hindsight.huber_values(towards)
+    goal_values = [min(values[i:i + per]) for i in range(0, len(values), per)]
+    mapping = hindsight.feasible_goal_mapping(goal_values, visited)
+    return mapping.tolist(), hindsight.mapped_actions(hindsight.goal_actions(towards, values, per), mapping)
+
+
+class _LastResult:
+    """A function of targets and more that remembers its last result and arguments.
+
+    In collaboration the arm and the human's hand hold still for most ticks (working, resetting,
+    waiting), and the same arguments give the same result: recomputing it would be pure waste.
+    Arrays are compared by content. The result is shared, so callers must not modify it.
+    """
+
+    def __init__(self, compute: Any) -> None:
+        self.compute = compute
+        self.targets: hindsight.Targets | None = None
+        self.key: tuple = ()
+        self.result: Any = None
+
+    def __call__(self, targets: hindsight.Targets, *args: Any) -> Any:
+        key = tuple(arg.tobytes() if isinstance(arg, np.ndarray) else arg for arg in args)
+        if targets is not self.targets or key != self.key:
+            self.targets, self.key, self.result = targets, key, self.compute(targets, *args)
+        return self.result
+
+
+class _PreparedTargets:
+    """The :class:`hindsight.Targets` of the last goal-target array seen, prepared once."""
+
+    def __init__(self) -> None:
+        self.source: np.ndarray | None = None
+        self.prepared: hindsight.Targets | None = None
+
+    def of(self, targets: np.ndarray) -> hindsight.Targets:
+        if targets is not self.source:
+            self.source, self.prepared = targets, hindsight.prepare_targets(targets)
+        return self.prepared

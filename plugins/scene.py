@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -33,14 +34,24 @@ def world_layout(spec: Any, scenario: Scenario, *, hand_start: tuple[float, floa
 
 
 def goal_targets(scenario: Scenario, names: list[str]) -> np.ndarray:
-    """``(goals, 2, 4, 4)``: each goal's two target end-effector poses."""
-    return np.stack([hindsight.target_poses(scenario.objects[name]) for name in names])
+    """``(goals, 2, 4, 4)``: each goal's two target end-effector poses, read-only.
+
+    Read-only because robots prepare it once (:func:`hindsight.prepare_targets`) and then
+    recognise it by identity on every tick.
+    """
+    targets = np.stack([hindsight.target_poses(scenario.objects[name]) for name in names])
+    targets.flags.writeable = False
+    return targets
 
 
-def at_goal(pose: np.ndarray, targets: np.ndarray, *, distance: float, angle: float) -> bool:
-    """Whether ``pose`` is within ``distance`` (m) and ``angle`` (rad) of any of ``targets``."""
-    d, theta = hindsight.pose_distances(pose, targets)
-    return bool(np.any((d < distance) & (theta < angle)))
+def at_goal(pose: np.ndarray, targets: hindsight.Targets | np.ndarray, *, distance: float, angle: float) -> bool:
+    """Whether ``pose`` is within ``distance`` (m) and ``angle`` (rad) of any of ``targets``.
+
+    Pass :class:`hindsight.Targets` when checking every tick.
+    """
+    if min(hindsight.distances(pose, targets)) >= distance:
+        return False  # too far from every target: no need for the rotations
+    return any(o.distance < distance and o.angle < angle for o in hindsight.offsets(pose, targets))
 
 
 def checked(value: np.ndarray, who: str, shape: tuple[int, ...]) -> np.ndarray:
@@ -48,6 +59,6 @@ def checked(value: np.ndarray, who: str, shape: tuple[int, ...]) -> np.ndarray:
     array = np.asarray(value, dtype=float)
     if array.shape != shape:
         raise ValueError(f"{who} returned shape {array.shape}, expected {shape}")
-    if not np.all(np.isfinite(array)):
+    if not all(map(math.isfinite, array.flat)):  # plain floats: a handful of numbers, twice a tick
         raise ValueError(f"{who} returned a non-finite value: {array.tolist()}")
     return array

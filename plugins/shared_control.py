@@ -16,8 +16,8 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from hritest import metrics
 from hritest.protocols import Rollout
-from hritest.sim import World
-from hritest_plugins import scene
+from hritest.sim import shared_world
+from hritest_plugins import hindsight, scene
 
 
 class SharedControlTask:
@@ -52,30 +52,30 @@ class SharedControlTask:
                              f"{self.goal_names}")
         self.dt = spec.task.dt
         self.ticks = int(round(spec.task.time_limit / self.dt))
-        self.world = World(layout=scene.world_layout(spec, scenario, hand_start=None))
+        self.layout = scene.world_layout(spec, scenario, hand_start=None)
 
     def run(self, *, robot: Any, human: Any, rng: np.random.Generator) -> Rollout:
-        p, world = self.params, self.world
-        world.reset()
+        p, world = self.params, shared_world(self.layout)
         targets = scene.goal_targets(self.scenario, self.goal_names)
         true = self.goal_names.index(p.true_goal)
+        true_targets = hindsight.prepare_targets(targets[true])
         goal_position = self.scenario.objects[p.true_goal]
         ee, joints, beliefs, events = [], [], [], []
         reached = False
+        who_h, who_r = f"human plugin {type(human).__name__}", f"robot plugin {type(robot).__name__}"
         for tick in range(self.ticks + 1):
             pose = world.ee_pose()
             ee.append(pose[:3, 3].copy())
             joints.append(world.q)
-            if scene.at_goal(pose, targets[true], distance=p.position_tolerance, angle=p.angle_tolerance):
+            if scene.at_goal(pose, true_targets, distance=p.position_tolerance, angle=p.angle_tolerance):
                 reached = True
                 events.append((tick * self.dt, f"reached {p.true_goal}"))
                 break
             if tick == self.ticks:
                 break
-            user = scene.checked(human.act({"ee_position": pose[:3, 3], "goal_position": goal_position}),
-                                 f"human plugin {type(human).__name__}", (6,))
+            user = scene.checked(human.act({"ee_position": pose[:3, 3], "goal_position": goal_position}), who_h, (6,))
             action = robot.act({"ee_pose": pose, "user_twist": user, "goal_targets": targets})
-            twist = scene.checked(action.twist, f"robot plugin {type(robot).__name__}", (6,))
+            twist = scene.checked(action.twist, who_r, (6,))
             if action.belief is not None:
                 beliefs.append(np.asarray(action.belief, dtype=float))
             world.step_twist(twist, self.dt)

@@ -9,6 +9,8 @@ y are ever read, because the user only commands planar motion.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -55,9 +57,13 @@ def user_velocity(
     Returns:
         ``(2,)`` command ``(vx, vy)``.
     """
-    v = gain * (np.asarray(target, dtype=np.float64)[:2] - np.asarray(current)[:2])
-    norm = np.linalg.norm(v)
-    return v * (max_speed / norm) if norm > max_speed else v
+    # Plain floats: called every tick on two numbers, where numpy's overhead is most of the cost.
+    (tx, ty), (cx, cy) = np.asarray(target, dtype=np.float64)[:2].tolist(), np.asarray(current)[:2].tolist()
+    vx, vy = gain * (tx - cx), gain * (ty - cy)
+    norm = math.hypot(vx, vy)
+    if norm > max_speed:
+        vx, vy = vx / norm * max_speed, vy / norm * max_speed
+    return np.array([vx, vy])
 
 
 def next_waypoint_index(
@@ -88,7 +94,7 @@ def next_waypoint_index(
     if index >= len(path) - 1:
         return index
     passed = path[index, 0] < np.asarray(ee_xy, dtype=np.float64)[0]
-    arrived = np.linalg.norm(velocity) < min_command
+    arrived = math.hypot(*np.asarray(velocity, dtype=np.float64)[:2].tolist()) < min_command
     return index + 1 if passed or arrived else index
 
 

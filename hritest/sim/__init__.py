@@ -11,6 +11,7 @@ from hritest.sim.world import (
     TwistStep,
     World,
     WorldLayout,
+    shared_world,
 )
 
 __all__ = [
@@ -23,5 +24,6 @@ __all__ = [
     "TwistStep",
     "World",
     "WorldLayout",
+    "shared_world",
     "twist_to_joint_velocity",
 ]

@@ -6,7 +6,6 @@ import math
 
 import numpy as np
 from scipy.linalg.lapack import dgesv
-from scipy.optimize import lsq_linear
 
 LIMIT_RATIO = 0.6  # the reference's "joint limit reached" threshold on the translation ratio
 
@@ -31,9 +30,10 @@ def twist_to_joint_velocity(
     whole vector down so that no joint runs above ``scale_at`` of its limit. It solved that with
     L-BFGS-B; the problem is a bounded linear least squares, so here it is solved exactly: the
     unconstrained solution first (one 6x6 solve, the common case at teleoperation speeds), and
-    only when that breaks a bound, scipy's ``lsq_linear``. ``dt`` also caps the motion towards a
-    limit to what is left of the range in one tick, so the servo's clip never silently truncates a
-    commanded velocity (with the default margin and Mico-like speeds it never binds).
+    only when that breaks a bound, scipy's bounded-variable least squares (:func:`_bvls`). ``dt``
+    also caps the motion towards a limit to what is left of the range in one tick, so the servo's
+    clip never silently truncates a commanded velocity (with the default margin and Mico-like
+    speeds it never binds).
 
     Args:
         jacobian: (6, n) world-frame Jacobian of the end effector, linear rows first.
@@ -55,14 +55,17 @@ def twist_to_joint_velocity(
         With no translation asked for at all, it is ``False``.
     """
     # Speed allowed towards each limit: none within `margin` of it, and never more than the room
-    # left in one tick. Unlimited joints have infinite room.
-    room_down, room_up = q - lower, upper - q
-    lo = np.where(room_down > margin, -np.minimum(velocity_limits, room_down / dt), 0.0)
-    hi = np.where(room_up > margin, np.minimum(velocity_limits, room_up / dt), 0.0)
+    # left in one tick. Unlimited joints have infinite room. Plain floats: numpy's per-call
+    # overhead on six numbers would be most of this function's cost, every tick.
+    lo, hi = [], []
+    for angle, low, high, speed in zip(q.tolist(), lower.tolist(), upper.tolist(), velocity_limits.tolist()):
+        down, up = angle - low, high - angle
+        lo.append(-min(speed, down / dt) if down > margin else 0.0)
+        hi.append(min(speed, up / dt) if up > margin else 0.0)
 
     qdot = _least_squares(jacobian, twist)
-    if ((qdot < lo) | (qdot > hi)).any():
-        qdot = _bounded_least_squares(jacobian, twist, lo, hi)
+    if any(v < low or v > high for v, low, high in zip(qdot.tolist(), lo, hi)):
+        qdot = _bounded_least_squares(jacobian, twist, np.array(lo), np.array(hi))
 
     # Three components: plain floats are several times faster than numpy here.
     ratios = [
@@ -72,7 +75,7 @@ def twist_to_joint_velocity(
     ]
     limit_reached = bool(ratios) and math.hypot(*ratios) < LIMIT_RATIO
 
-    peak = (np.abs(qdot) / velocity_limits).max()
+    peak = max(abs(v) / speed for v, speed in zip(qdot.tolist(), velocity_limits.tolist()))
     if peak > scale_at:
         qdot = qdot * (scale_at / peak)
     return qdot, limit_reached
@@ -92,10 +95,76 @@ def _least_squares(jacobian: np.ndarray, twist: np.ndarray) -> np.ndarray:
 def _bounded_least_squares(
     jacobian: np.ndarray, twist: np.ndarray, lo: np.ndarray, hi: np.ndarray
 ) -> np.ndarray:
-    # lsq_linear needs lo < hi strictly; a joint with no room either way is pinned at its bound.
+    # BVLS needs lo < hi strictly; a joint with no room either way is pinned at its bound.
     free = lo < hi
     qdot = lo.copy()
     if free.any():
         rest = twist - jacobian[:, ~free] @ qdot[~free]
-        qdot[free] = lsq_linear(jacobian[:, free], rest, bounds=(lo[free], hi[free]), method="bvls").x
+        qdot[free] = _bvls(jacobian[:, free], rest, lo[free], hi[free])
     return qdot
+
+
+def _bvls(a: np.ndarray, b: np.ndarray, lb: np.ndarray, ub: np.ndarray, tol: float = 1e-10) -> np.ndarray:
+    """``scipy.optimize.lsq_linear(a, b, (lb, ub), method="bvls", tol=tol).x``, step for step.
+
+    Stark and Parker's bounded-variable least squares as scipy 1.17 implements it: the same
+    start, least-squares solves, tie-breaking, tolerance and iteration cap, so the same result
+    to the bit. Only the bookkeeping differs, in plain Python on the few joints: scipy's
+    generic version spends most of its ~150 us per call on small-array overhead, and a
+    collaboration scenario makes about a hundred calls.
+    """
+    n = a.shape[1]
+    x = np.linalg.lstsq(a, b, rcond=-1)[0]
+    if ((x >= lb) & (x <= ub)).all():
+        return x
+    lower, upper = lb.tolist(), ub.tolist()
+    # side[i]: -1 or 1 while joint i is held at its lower or upper bound, 0 while free.
+    side = [-1 if v <= low else 1 if v >= high else 0 for v, low, high in zip(x.tolist(), lower, upper)]
+    x = np.clip(x, lb, ub)
+    # Start: solve for the free joints, hold those that leave their box at the bound, repeat.
+    while 0 in side:
+        free, z = _free_solution(a, b, x, side)
+        for i, value in zip(free, z.tolist()):
+            if value < lower[i] or value > upper[i]:
+                side[i] = -1 if value < lower[i] else 1
+                x[i] = lower[i] if value < lower[i] else upper[i]
+            else:
+                x[i] = value
+        if side.count(0) == len(free):
+            break
+    r = a @ x - b
+    cost, gradient = 0.5 * np.dot(r, r), (a.T @ r).tolist()
+    for _ in range(n):
+        if max(abs(g) if s == 0 else g * s for g, s in zip(gradient, side)) < tol:
+            break  # the KKT conditions hold
+        side[max(range(n), key=lambda i: gradient[i] * side[i])] = 0  # free the most promising
+        while True:  # towards the free solution, stopping where a joint meets its bound
+            free, z = _free_solution(a, b, x, side)
+            x_free, goal = x[free], z.tolist()
+            now = x_free.tolist()
+            leaving = [(k, -1, lower[i]) for k, i in enumerate(free) if goal[k] < lower[i]]
+            leaving += [(k, 1, upper[i]) for k, i in enumerate(free) if goal[k] > upper[i]]
+            if not leaving:
+                x[free] = z
+                break
+            steps = [(bound - now[k]) / (goal[k] - now[k]) for k, _, bound in leaving]
+            first = min(range(len(steps)), key=steps.__getitem__)
+            x_free *= 1 - steps[first]
+            x_free += steps[first] * z
+            x[free] = x_free
+            k, bound_side, _ = leaving[first]
+            side[free[k]] = bound_side
+        r = a @ x - b
+        cost_new = 0.5 * np.dot(r, r)
+        converged = cost - cost_new < tol * cost
+        cost, gradient = cost_new, (a.T @ r).tolist()
+        if converged:
+            break
+    return x
+
+
+def _free_solution(a: np.ndarray, b: np.ndarray, x: np.ndarray, side: list[int]) -> tuple[list[int], np.ndarray]:
+    """The free joints, and their least-squares solution with the held ones where they are."""
+    free = [i for i, s in enumerate(side) if s == 0]
+    held = x * np.array([s != 0 for s in side])
+    return free, np.linalg.lstsq(a[:, free], b - a @ held, rcond=None)[0]

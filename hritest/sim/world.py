@@ -4,11 +4,18 @@ This is the only module in hritest that imports ``mujoco``: its Python API chang
 versions (4.0 split the package and changed several MJCF semantics), so every call lives here.
 The arm moves kinematically, as the reference's simulated servo did: each tick sets
 ``q <- clip(q + qdot * dt)`` and recomputes the forward kinematics; no dynamics are stepped.
+
+Building a world (parse the arm, compile, allocate MuJoCo's data arena) takes milliseconds, more
+than a short episode's whole tick loop, while the scenarios of one spec differ only in where
+the goal boxes are. So the boxes are mocap bodies, placed from the layout on every reset, and
+:func:`shared_world` hands a task the world its thread already built for the same fixed parts.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass, replace
 
 import mujoco
 import numpy as np
@@ -23,6 +30,8 @@ START_CONFIG = (-2.38, -0.43, -0.28, -0.75, 0.0, 3.55)
 HAND_RADIUS = 0.035
 _ARM_PREFIX = "arm/"  # keeps the arm file's names apart from the world's
 _LIMIT_SLACK = 1e-8  # the reference servo clips to the joint limits +- this
+_OBJECT_PREFIX = "object/"  # the goal boxes' mocap bodies, apart from the hand and the arm
+_SHARED_PER_THREAD = 4  # worlds kept by shared_world: one per spec in use is enough
 
 
 class ArmModelError(HritestError):
@@ -51,7 +60,8 @@ class WorldLayout:
     """What a world contains; a :class:`World` compiles it once.
 
     Only the table (and the arm's own pedestal) can collide with the arm. ``regions`` are thin
-    visual slabs and ``objects`` the goal boxes, which never collide with or block the arm.
+    visual slabs and ``objects`` the goal boxes (mocap bodies, see :meth:`World.show`), which
+    never collide with or block the arm.
     ``hand_start`` places a mocap sphere for the human's hand (``None``: no hand).
     ``arm_mjcf`` is the path of a user's arm MJCF (``None``: the built-in Mico-like arm, see
     :mod:`hritest.sim.arm`); its hinge joints, in file order, are the arm's joints, ``ee_site``
@@ -130,18 +140,41 @@ class World:
             if layout.hand_start is not None
             else None
         )
+        self._objects = np.array([
+            m.body_mocapid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, _OBJECT_PREFIX + box.name)]
+            for box in layout.objects
+        ], dtype=int)
         self._start = np.array(layout.start_config, dtype=float)
         self._q = np.empty(len(hinges))
         self._jac_full = np.zeros((6, m.nv))
         self._jac = np.zeros((6, len(hinges)))
+        self._ee_pose = np.eye(4)
+        # Views into MjData (its buffers never move): cheaper than looking the rows up every tick.
+        self._site_rotation = self._data.site_xmat[site].reshape(3, 3)
+        self._site_position = self._data.site_xpos[site]
         self.reset()
 
     def reset(self) -> None:
-        """Fresh data (nothing leaks between episodes), arm at the start, hand at its start."""
+        """Fresh data (nothing leaks between episodes), arm at the start, hand at its start,
+        goal boxes where the layout puts them."""
         mujoco.mj_resetData(self._model, self._data)
         if self._hand is not None:
             self._data.mocap_pos[self._hand] = self.layout.hand_start
+        if len(self._objects):
+            self._data.mocap_pos[self._objects] = [box.center for box in self.layout.objects]
         self.set_q(self._start)
+
+    def show(self, layout: WorldLayout) -> None:
+        """Switches to ``layout``, which may differ from this world's only in where the goal
+        boxes are, and resets.
+
+        Raises:
+            ValueError: if anything else differs (that needs a new :class:`World`).
+        """
+        if _fixed_part(layout) != _fixed_part(self.layout):
+            raise ValueError("World.show can only move the goal boxes; build a new World for this layout")
+        self.layout = layout
+        self.reset()
 
     @property
     def q(self) -> np.ndarray:
@@ -165,11 +198,8 @@ class World:
         return self._speeds.copy()
 
     def ee_pose(self) -> np.ndarray:
-        """The tool site's 4x4 pose in the world frame."""
-        pose = np.eye(4)
-        pose[:3, :3] = self._data.site_xmat[self._site].reshape(3, 3)
-        pose[:3, 3] = self._data.site_xpos[self._site]
-        return pose
+        """The tool site's 4x4 pose in the world frame (a copy)."""
+        return self._ee_pose.copy()
 
     def jacobian(self) -> np.ndarray:
         """(6, n_joints) world-frame Jacobian of the tool site: linear rows, then angular."""
@@ -241,11 +271,44 @@ class World:
         mujoco.mj_comPos(m, d)
         mujoco.mj_jacSite(m, d, self._jac_full[:3], self._jac_full[3:], self._site)
         self._jac_full.take(self._dofadr, axis=1, out=self._jac)
+        # Kept up to date here, so that reading it (every tick, arm moving or not) is one copy.
+        self._ee_pose[:3, :3] = self._site_rotation
+        self._ee_pose[:3, 3] = self._site_position
 
     def _hand_id(self) -> int:
         if self._hand is None:
             raise HritestError("This world has no hand: its layout's hand_start is None.")
         return self._hand
+
+
+def shared_world(layout: WorldLayout) -> World:
+    """A reset world showing ``layout``, reused by later calls on this thread.
+
+    Built once per layout's fixed part (everything but the goal boxes' positions), then moved
+    with :meth:`World.show`. Each thread keeps its own few, so parallel evaluations in threads
+    never share one; but within a thread the world is the same object every time, so finish
+    with it (one episode) before asking again.
+    """
+    worlds = getattr(_local, "worlds", None)
+    if worlds is None:
+        worlds = _local.worlds = OrderedDict()
+    key = _fixed_part(layout)
+    world = worlds.get(key)
+    if world is None:
+        world = worlds[key] = World(layout=layout)
+        if len(worlds) > _SHARED_PER_THREAD:
+            worlds.popitem(last=False)
+    else:
+        worlds.move_to_end(key)
+        world.show(layout)
+    return world
+
+
+_local = threading.local()
+
+
+def _fixed_part(layout: WorldLayout) -> WorldLayout:
+    return replace(layout, objects=tuple(replace(box, center=(0.0, 0.0, 0.0)) for box in layout.objects))
 
 
 def _arm_joints_and_site(m: mujoco.MjModel, layout: WorldLayout) -> tuple[list[int], int]:
@@ -270,9 +333,12 @@ def _arm_joints_and_site(m: mujoco.MjModel, layout: WorldLayout) -> tuple[list[i
 def _compile(layout: WorldLayout, arm: mujoco.MjSpec) -> mujoco.MjModel:
     spec = mujoco.MjSpec()
     spec.compiler.degree = False
-    _add_box(spec, layout.table, collides=True)
-    for box in (*layout.regions, *layout.objects):
-        _add_box(spec, box, collides=False)
+    _add_box(spec.worldbody, layout.table, pos=layout.table.center, collides=True)
+    for box in layout.regions:
+        _add_box(spec.worldbody, box, pos=box.center, collides=False)
+    for box in layout.objects:
+        body = spec.worldbody.add_body(name=_OBJECT_PREFIX + box.name, mocap=True, pos=list(box.center))
+        _add_box(body, box, pos=(0.0, 0.0, 0.0), collides=False)
     if layout.hand_start is not None:
         hand = spec.worldbody.add_body(name="hand", mocap=True, pos=list(layout.hand_start))
         hand.add_geom(
@@ -287,11 +353,11 @@ def _compile(layout: WorldLayout, arm: mujoco.MjSpec) -> mujoco.MjModel:
     return spec.compile()
 
 
-def _add_box(spec: mujoco.MjSpec, box: Box, *, collides: bool) -> None:
-    spec.worldbody.add_geom(
+def _add_box(body: mujoco.MjsBody, box: Box, *, pos: tuple[float, float, float], collides: bool) -> None:
+    body.add_geom(
         name=box.name,
         type=mujoco.mjtGeom.mjGEOM_BOX,
-        pos=list(box.center),
+        pos=list(pos),
         size=list(box.half_size),
         rgba=list(box.rgba),
         contype=int(collides),

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
 
 from hritest_plugins import hindsight as h
 from hritest_plugins import teleop_human as th
@@ -253,3 +254,29 @@ def test_timid_blending_mixes_xy_by_confidence():
     np.testing.assert_allclose(capped[:2], 0.6 * assisted[:2] + 0.4 * USER[:2])
     with pytest.raises(ValueError, match="timid"):
         h.blend_twist([1.0], ACTIONS[:1], USER, mode="bold")
+
+
+# --- the prepared per-tick path -----------------------------------------------------------
+
+
+def test_rotation_angle_matches_scipy_at_every_angle_including_half_turns():
+    rng = np.random.default_rng(4)
+    half_turns = Rotation.from_rotvec(np.pi * Rotation.random(20, random_state=rng).apply([1.0, 0.0, 0.0]))
+    target = pose_at([0.6, 0.0, Z])
+    for turn in [*Rotation.random(200, random_state=rng), *half_turns]:
+        _, angle = h.pose_distances(pose_at([0.5, 0.1, Z], turn.as_matrix() @ h.GOAL_ROTATION), target)
+        assert angle == pytest.approx(turn.magnitude(), abs=1e-12)
+
+
+@pytest.mark.parametrize("twist", [[0.03, -0.01, 0.0, 0.0, 0.0, 0.0], [0.03, -0.01, 0.01, 0.2, -0.1, 0.3]])
+def test_lookahead_agrees_with_the_per_target_functions(twist):
+    goals = two_goals()
+    pose = h.apply_twist(pose_at([0.45, 0.02, Z]), [0, 0, 0, 0.1, 0.2, 0.3], 1.0)
+    look = h.lookahead(pose, twist, h.prepare_targets(goals))
+    after = h.apply_twist(pose, twist, C.action_apply_time)
+    np.testing.assert_allclose(np.reshape(look.values, (2, 2)), h.target_value(pose, goals), atol=1e-12)
+    np.testing.assert_allclose(np.reshape(look.q_values, (2, 2)), h.target_q_value(pose, twist, goals), atol=1e-12)
+    np.testing.assert_allclose(np.reshape(look.values_after, (2, 2)), h.target_value(after, goals), atol=1e-12)
+    best = np.reshape(look.values_after, (2, 2)).argmin(axis=1)
+    expected = h.target_action(after, goals[np.arange(2), best])
+    np.testing.assert_allclose(h.goal_actions(look.after, look.values_after, 2), expected, atol=1e-12)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.optimize import lsq_linear
 
-from hritest.sim.control import twist_to_joint_velocity
+from hritest.sim.control import _bvls, twist_to_joint_velocity
 
 SPEEDS = np.full(6, 0.8)
 FREE = dict(lower=np.full(6, -np.inf), upper=np.full(6, np.inf), velocity_limits=SPEEDS)
@@ -91,3 +91,13 @@ def test_a_singular_jacobian_still_gives_finite_velocities():
     J[:, 5] = J[:, 4]  # two joints doing the same thing
     qdot, _ = twist_to_joint_velocity(J, np.full(6, 0.05), np.zeros(6), **FREE)
     assert np.all(np.isfinite(qdot)) and np.all(np.abs(qdot) <= 0.95 * SPEEDS + 1e-12)
+
+
+def test_the_bounded_solver_is_scipys_bvls_to_the_bit():
+    # _bvls re-implements lsq_linear(method="bvls") without its per-call overhead; same steps.
+    rng = np.random.default_rng(11)
+    for _ in range(300):
+        n = int(rng.integers(1, 7))
+        a, b = rng.normal(size=(6, n)), rng.normal(size=6) * rng.uniform(0.1, 5.0)
+        lb, ub = -rng.uniform(0.05, 1.0, n), rng.uniform(0.05, 1.0, n)
+        np.testing.assert_array_equal(_bvls(a, b, lb, ub), lsq_linear(a, b, bounds=(lb, ub), method="bvls").x)

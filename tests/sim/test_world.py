@@ -8,6 +8,7 @@ from scipy.spatial.transform import Rotation
 
 from hritest.errors import HritestError
 from hritest.sim import DT, START_CONFIG, ArmModelError, Box, World, WorldLayout
+from hritest.sim.world import shared_world
 
 R_GOAL = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 R_GOAL_TURNED = np.diag([-1.0, -1.0, 1.0]) @ R_GOAL  # the second target: 180 deg about world z
@@ -209,6 +210,32 @@ def test_same_twists_give_bit_identical_joints(world: World):
     first = run(world)
     np.testing.assert_array_equal(first, run(world))
     np.testing.assert_array_equal(first, run(World(layout=reference_layout())))
+
+
+def moved_goals(x: float) -> WorldLayout:
+    return reference_layout(objects=(Box(name="goal0", center=(x, 0.05, 0.96), half_size=(0.032,) * 3),))
+
+
+def test_a_shared_world_is_reused_for_new_goal_positions_and_behaves_as_a_fresh_one():
+    twists = np.random.default_rng(5).normal(0.0, 0.1, (200, 6))
+
+    def run(w: World) -> np.ndarray:
+        for twist in twists:
+            w.step_twist(twist)
+        return w.q
+
+    first = shared_world(moved_goals(0.6))
+    run(first)
+    again = shared_world(moved_goals(0.55))  # only a goal box moved: the same world, reset
+    assert again is first and again.layout == moved_goals(0.55)
+    np.testing.assert_array_equal(again.q, START_CONFIG)
+    np.testing.assert_array_equal(run(again), run(World(layout=moved_goals(0.55))))
+    assert shared_world(reference_layout(hand_start=None)) is not first  # a fixed part changed
+
+
+def test_show_refuses_anything_but_moved_goal_boxes(world: World):
+    with pytest.raises(ValueError, match="only move the goal boxes"):
+        world.show(reference_layout(hand_start=None))
 
 
 def test_reset_restores_the_start_and_the_hand(world: World):
