@@ -108,8 +108,10 @@ class Evaluator:
     Args:
         ref: the domain the workers evaluate.
         make_executor: builds a fresh executor (called again after a worker dies).
-        workers: how many jobs to keep in flight; each starts as soon as it is submitted.
-        timeout: seconds one scenario may take; a worker stuck past twice that is killed.
+        workers: how many jobs run at once; twice as many are kept submitted, so that no worker
+            waits for the parent between two jobs.
+        timeout: seconds one scenario may take; a worker stuck past twice that (counted from
+            submission, so a job's time in the queue is covered by the slack) is killed.
     """
 
     def __init__(self, *, ref: DomainRef, make_executor: Callable[[], cf.Executor], workers: int,
@@ -129,7 +131,7 @@ class Evaluator:
         attempts: dict[int, int] = {}
         running: dict[cf.Future, tuple[Job, float]] = {}
         while queue or suspects or running:
-            capacity = 1 if suspects else self.workers
+            capacity = 1 if suspects else 2 * self.workers  # one queued per worker: no idle gap
             while len(running) < capacity and (suspects or queue):
                 job = suspects.pop() if suspects else queue.pop()
                 running[self.executor.submit(run_job, self.ref, job, self.timeout)] = (job, time.monotonic())

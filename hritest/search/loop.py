@@ -24,6 +24,9 @@ from hritest.search.executor import Evaluator, Job
 from hritest.search.proposers import ModelFree, SurrogateAssisted, SurrogateOptions
 
 SURROGATE = ("sas", "dsas")
+# progress.csv, archive.csv and failures.yaml are rewritten at most this often (and at the end):
+# between batches the workers wait, so the loop does only what resuming needs (the checkpoint).
+SUMMARY_SECONDS = 5.0
 ALGORITHMS = (*algorithms.MODEL_FREE, *SURROGATE)
 
 
@@ -78,6 +81,7 @@ class Search:
         self.domain, self.run_dir, self.state = domain, run, state
         self.records: dict[int, dict] = {r["index"]: r for r in run.evaluations()}
         self.occupancy_shape = (len(domain.task_cls.agents), 32, 32)
+        self.summarised = -math.inf
 
     @classmethod
     def new(cls, *, domain: Domain, run: RunDirectory, algorithm: str, budget: int, seed: int,
@@ -144,11 +148,14 @@ class Search:
         jobs = [Job(first + i, pending["solutions"][i], evaluation_seed(state["seed"], first + i))
                 for i in range(count) if first + i not in self.records]
 
+        done = [count - len(jobs)]  # of this batch, finished before (a resumed batch) or now
+
         def finished(job: Job, evaluation: Evaluation) -> None:
             record = record_of(job, batch, evaluation)
             self.run_dir.append(record, evaluation.occupancy, self.occupancy_shape)
             self.records[job.index] = record
-            progress(self.snapshot(extra=len([i for i in range(first, first + count) if i in self.records])))
+            done[0] += 1
+            progress(self.snapshot(extra=done[0]))
 
         evaluator.run(jobs, finished)
         records = [self.records[first + i] for i in range(count)]
@@ -165,7 +172,9 @@ class Search:
             "coverage": summary.coverage, "best": summary.best, "failures": len(failures),
         })
         self.run_dir.save_checkpoint(state)
-        self.write_summaries(failures)
+        if self.done or time.monotonic() - self.summarised >= SUMMARY_SECONDS:
+            self.write_summaries(failures)
+            self.summarised = time.monotonic()
         progress(Snapshot(state["evaluations"], state["budget"], summary, len(failures)))
 
     def _add_to_result(self, records: list[dict]) -> None:
