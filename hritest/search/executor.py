@@ -130,11 +130,26 @@ class Evaluator:
         suspects: list[Job] = []          # jobs in flight when a worker died: rerun one at a time
         attempts: dict[int, int] = {}
         running: dict[cf.Future, tuple[Job, float]] = {}
+        isolated: set[int] = set()        # suspects submitted: nothing may run beside them
         while queue or suspects or running:
-            capacity = 1 if suspects else 2 * self.workers  # one queued per worker: no idle gap
+            alone = suspects or any(job.index in isolated for job, _ in running.values())
+            capacity = 1 if alone else 2 * self.workers  # one queued per worker: no idle gap
+            broken = False
             while len(running) < capacity and (suspects or queue):
-                job = suspects.pop() if suspects else queue.pop()
-                running[self.executor.submit(run_job, self.ref, job, self.timeout)] = (job, time.monotonic())
+                from_suspects = bool(suspects)
+                job = suspects.pop() if from_suspects else queue.pop()
+                try:
+                    future = self.executor.submit(run_job, self.ref, job, self.timeout)
+                except BrokenProcessPool:  # a worker died before we saw it: not this job's doing
+                    (suspects if from_suspects else queue).append(job)
+                    broken = True
+                    break
+                if from_suspects:
+                    isolated.add(job.index)
+                running[future] = (job, time.monotonic())
+            if broken:
+                self._crashed(running, attempts, suspects, on_result)
+                continue
             done, _ = cf.wait(running, timeout=1.0, return_when=cf.FIRST_COMPLETED)
             if not done and self._kill_stuck(running):
                 for job, started in running.values():
@@ -164,10 +179,15 @@ class Evaluator:
                     attempts[job.index] = 1
                     queue.append(job)
             if broken:
-                for job, _ in running.values():
-                    self._retry_or_report(job, attempts, suspects, on_result, "crashed",
-                                          "the worker process died while evaluating this scenario")
-                self._restart(running)
+                self._crashed(running, attempts, suspects, on_result)
+
+    def _crashed(self, running: dict, attempts: dict[int, int], suspects: list[Job],
+                 on_result: Callable[[Job, Evaluation], None]) -> None:
+        """A worker died: every job in flight becomes a suspect, rerun alone, then the pool restarts."""
+        for job, _ in running.values():
+            self._retry_or_report(job, attempts, suspects, on_result, "crashed",
+                                  "the worker process died while evaluating this scenario")
+        self._restart(running)
 
     @property
     def _hard_limit(self) -> float:
