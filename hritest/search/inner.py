@@ -9,6 +9,8 @@ downsampled, one random elite per block of cells, to choose what the real simula
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import torch
 from ribs.archives import GridArchive
@@ -80,12 +82,17 @@ def exploit(domain: Domain, objective: SurrogateObjective, *, gradients: bool, i
                                              batch_size=settings.batch_size, seed=int(s))
                     for s in seeds]
     scheduler = Scheduler(archive, emitters)
-    for _ in range(iterations):
-        if gradients:
-            points = scheduler.ask_dqd()
-            scheduler.tell_dqd(*objective.with_jacobian(points))
-        solutions = scheduler.ask()
-        scheduler.tell(*objective(solutions))
+    with warnings.catch_warnings():
+        # From x0 (zeros, far outside every region in the collaboration specs) the first batches can
+        # all score below threshold_min; ribs then warns of an empty archive, which the emitters soon
+        # leave. Not the user's concern.
+        warnings.filterwarnings("ignore", message="`archive` was empty before adding solutions")
+        for _ in range(iterations):
+            if gradients:
+                points = scheduler.ask_dqd()
+                scheduler.tell_dqd(*objective.with_jacobian(points))
+            solutions = scheduler.ask()
+            scheduler.tell(*objective(solutions))
     return archive
 
 
