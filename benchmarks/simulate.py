@@ -38,7 +38,7 @@ from hritest.domain import Domain, compile_spec  # noqa: E402
 from hritest.evaluate import evaluate, evaluate_with_rollout  # noqa: E402
 from hritest.sim import World  # noqa: E402
 from hritest.spec import load_spec  # noqa: E402
-from hritest_plugins.scene import world_layout  # noqa: E402
+from hritest.sim import world_layout  # noqa: E402
 
 SPECS = Path(__file__).resolve().parent.parent / "specs"
 DEFAULT_N = {"teleop": 1000, "collab": 200}

@@ -160,7 +160,7 @@ def _log_scenario(rec: Any, domain: Any, evaluation: Any, title: str) -> None:
 
 
 def _layout(domain: Any, scenario: Any, rollout: Any):  # noqa: ANN202 - hritest.sim.WorldLayout
-    from hritest_plugins.scene import world_layout
+    from hritest.sim import world_layout
 
     hand = rollout.human_hand
     start = tuple(float(v) for v in hand[0]) if hand is not None and len(hand) else None

@@ -25,7 +25,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from hritest import metrics
 from hritest.protocols import Rollout
-from hritest.sim import shared_world
+from hritest.sim import shared_world, world_layout
 from hritest_plugins import hindsight, scene
 
 HAND_HEIGHT = 0.96
@@ -83,7 +83,7 @@ class CollaborationTask:
         self.dt = spec.task.dt
         self.ticks = int(round(spec.task.time_limit / self.dt))
         self.start = np.array([*params.human_start, HAND_HEIGHT])
-        self.layout = scene.world_layout(spec, scenario, hand_start=tuple(self.start))
+        self.layout = world_layout(spec, scenario, hand_start=tuple(self.start))
 
     def _ticks(self, seconds: float) -> int:
         return int(round(seconds / self.dt))

@@ -16,7 +16,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from hritest import metrics
 from hritest.protocols import Rollout
-from hritest.sim import shared_world
+from hritest.sim import shared_world, world_layout
 from hritest_plugins import hindsight, scene
 
 
@@ -52,7 +52,7 @@ class SharedControlTask:
                              f"{self.goal_names}")
         self.dt = spec.task.dt
         self.ticks = int(round(spec.task.time_limit / self.dt))
-        self.layout = scene.world_layout(spec, scenario, hand_start=None)
+        self.layout = world_layout(spec, scenario, hand_start=None)
 
     def run(self, *, robot: Any, human: Any, rng: np.random.Generator) -> Rollout:
         p, world = self.params, shared_world(self.layout)

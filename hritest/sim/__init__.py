@@ -1,6 +1,7 @@
 """The simulation core: a kinematic MuJoCo arm driven by world-frame twists, and its scene."""
 
 from hritest.sim.control import twist_to_joint_velocity
+from hritest.sim.scene import world_layout
 from hritest.sim.world import (
     DT,
     HAND_RADIUS,
@@ -26,4 +27,5 @@ __all__ = [
     "WorldLayout",
     "shared_world",
     "twist_to_joint_velocity",
+    "world_layout",
 ]

@@ -52,7 +52,7 @@ def test_same_spec_and_seed_give_the_same_result_archive(toy_spec, tmp_path):
     spec = toy_spec()
     a = qd.start(spec_file=spec, out=tmp_path / "a", budget=400, seed=7, backend=TWO)
     b = qd.start(spec_file=spec, out=tmp_path / "b", budget=400, seed=7, backend=qd.Backend(workers=1))
-    c = qd.start(spec_file=spec, out=tmp_path / "c", budget=400, seed=8, backend=TWO)
+    qd.start(spec_file=spec, out=tmp_path / "c", budget=400, seed=8, backend=TWO)
     assert elites(tmp_path / "a") == elites(tmp_path / "b")
     assert elites(tmp_path / "a") != elites(tmp_path / "c")
     assert a.state["result"].stats.qd_score == b.state["result"].stats.qd_score
