@@ -88,6 +88,15 @@ class CollaborationTask:
     def _ticks(self, seconds: float) -> int:
         return int(round(seconds / self.dt))
 
+    def _wait_or_work(self, agent: _Agent, who: str, work_time: float, blocked: dict[int, str],
+                      record: _Record, t: float) -> None:
+        """An agent at its goal starts work once the other is not working there; until then it waits."""
+        if agent.goal in blocked:
+            agent.wait += self.dt
+        else:
+            blocked[agent.goal], agent.state, agent.timer = who, "working", self._ticks(work_time)
+            record.event(t, f"{who} starts work on {self.names[agent.goal]}")
+
     def run(self, *, robot: Any, human: Any, rng: np.random.Generator) -> Rollout:
         p, world = self.params, shared_world(self.layout)
         targets = scene.goal_targets(self.scenario, self.names)
@@ -120,11 +129,7 @@ class CollaborationTask:
                     velocity = scene.checked(human.act({"hand_position": hand, "goal_position": goals[goal],
                                                         "other_goals": others[goal]}), who_h, (3,))
             if h.state == "waiting":
-                if h.goal in blocked:
-                    h.wait += self.dt
-                else:
-                    blocked[h.goal], h.state, h.timer = "human", "working", self._ticks(p.human_work_time)
-                    record.event(t, f"human starts work on {self.names[h.goal]}")
+                self._wait_or_work(h, "human", p.human_work_time, blocked, record, t)
             elif h.state == "working":
                 h.timer -= 1
                 if h.timer <= 0:
@@ -170,11 +175,7 @@ class CollaborationTask:
                         record.event(t, "robot replans")
                         record.replans += 1
             if r.state == "waiting":
-                if r.goal in blocked:
-                    r.wait += self.dt
-                else:
-                    blocked[r.goal], r.state, r.timer = "robot", "working", self._ticks(p.robot_work_time)
-                    record.event(t, f"robot starts work on {self.names[r.goal]}")
+                self._wait_or_work(r, "robot", p.robot_work_time, blocked, record, t)
             elif counting:
                 r.timer -= 1
                 if r.timer <= 0:
