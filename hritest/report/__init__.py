@@ -236,17 +236,10 @@ def compare_runs(run_paths: Sequence[Path], out: Path) -> Path:
 
 def _write(doc: Document, out: Path) -> None:
     for figure in doc.figures():
-        _publish(out / figure.name, figure.png)
-    _publish(out / "summary.md", to_markdown(doc))
-    _publish(out / "index.html", to_html(doc))
+        atomic_write(out / figure.name, figure.png)
+    atomic_write(out / "summary.md", to_markdown(doc))
+    atomic_write(out / "index.html", to_html(doc))
 
-
-def _publish(path: Path, data: bytes | str) -> None:
-    """Writes atomically, readable by others as any file the user makes (mkstemp's are 0600)."""
-    atomic_write(path, data)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(path, 0o666 & ~umask)
 
 
 def run_document(data: RunData, recorded: Mapping[int, Recorded], *, link_base: Path,
