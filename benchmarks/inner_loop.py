@@ -34,14 +34,14 @@ class Timed(SurrogateObjective):
     def __call__(self, solutions):  # noqa: ANN001, ANN204
         start = time.perf_counter()
         result = super().__call__(solutions)
-        _sync(self.surrogate.device)
+        _sync(self.device)
         Timed.forward += time.perf_counter() - start
         return result
 
     def with_jacobian(self, solutions):  # noqa: ANN001, ANN204
         start = time.perf_counter()
         result = super().with_jacobian(solutions)
-        _sync(self.surrogate.device)
+        _sync(self.device)
         Timed.jacobian += time.perf_counter() - start
         return result
 

@@ -3,7 +3,7 @@
 Each outer iteration builds a fresh archive and fresh emitters at x0 and runs ``iterations``
 rounds of CMA-MAE (SAS) or CMA-MAEGA (DSAS) where every batch, from all emitters at once, is
 scored by one forward pass of the surrogate (and, for DSAS, the objective and measure gradients
-of the emitters' solution points by one batched backward pass per output). The elites are then
+of the emitters' solution points by one backward pass over stacked copies of them). The elites are then
 downsampled, one random elite per block of cells, to choose what the real simulator evaluates.
 """
 
@@ -19,6 +19,7 @@ from ribs.schedulers import Scheduler
 
 from hritest.domain import Domain
 from hritest.search import algorithms, archives
+from hritest.surrogate.inference import keep_freed_memory
 from hritest.surrogate.model import Surrogate
 from hritest.surrogate.penalty import Penalty
 
@@ -28,30 +29,36 @@ class SurrogateObjective:
     plus, where the spec has several regions, each object's nearest region (no gradient)."""
 
     def __init__(self, domain: Domain, surrogate: Surrogate) -> None:
-        self.surrogate = surrogate
+        self.device = surrogate.device
+        self.network = surrogate.refolded()  # the surrogate as trained now; rebuilt each outer iteration
         self.penalty = Penalty(domain.repair.penalty_terms(), surrogate.device)
         self.region_axes = len(archives.workspace_objects(domain)) > 0
 
     def _outputs(self, x: torch.Tensor) -> torch.Tensor:
-        predicted = self.surrogate(x)
+        predicted = self.network(x)
         return torch.cat([predicted[:, :1] - self.penalty(x)[:, None], predicted[:, 1:]], dim=1)
 
     def __call__(self, solutions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         with torch.inference_mode():
-            x = torch.as_tensor(solutions, dtype=torch.float32, device=self.surrogate.device)
+            x = torch.as_tensor(solutions, dtype=torch.float32, device=self.device)
             out = self._outputs(x)
             measures = self._with_regions(x, out[:, 1:])
             return out[:, 0].double().cpu().numpy(), measures.double().cpu().numpy()
 
     def with_jacobian(self, solutions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Objective, measures and ``(batch, 1 + measures, dim)`` Jacobian (region rows are zero)."""
-        x = torch.as_tensor(solutions, dtype=torch.float32, device=self.surrogate.device).requires_grad_(True)
-        out = self._outputs(x)
-        # In eval mode rows do not interact, so the gradient of a column's sum is each row's gradient.
-        rows = [torch.autograd.grad(out[:, j].sum(), x, retain_graph=j < out.shape[1] - 1)[0]
-                for j in range(out.shape[1])]
-        jacobian = torch.stack(rows, dim=1).detach()
-        out = out.detach()
+        """Objective, measures and ``(batch, 1 + measures, dim)`` Jacobian (region rows are zero).
+
+        In eval mode rows do not interact, so one forward pass over ``outputs`` stacked copies of
+        the batch and one backward pass of the sum of copy ``j``'s output ``j`` give every row.
+        """
+        x = torch.as_tensor(solutions, dtype=torch.float32, device=self.device)
+        n, outputs = len(x), self.network.outputs
+        copies = x.repeat(outputs, 1).requires_grad_(True)
+        stacked = self._outputs(copies).view(outputs, n, outputs)
+        picked = stacked.diagonal(dim1=0, dim2=2)  # (n, outputs): copy j's output j
+        (gradient,) = torch.autograd.grad(picked.sum(), copies)
+        jacobian = gradient.view(outputs, n, -1).transpose(0, 1)
+        out = stacked[0].detach()
         with torch.no_grad():
             measures = self._with_regions(x, out[:, 1:])
             if self.region_axes:
@@ -67,6 +74,7 @@ class SurrogateObjective:
 def exploit(domain: Domain, objective: SurrogateObjective, *, gradients: bool, iterations: int,
             seed: int) -> GridArchive:
     """Runs the inner loop from scratch and returns its archive of surrogate elites."""
+    keep_freed_memory()
     settings = domain.spec.search.emitter
     archive = archives.search_archive(domain, seed=seed)
     seeds = np.random.SeedSequence(seed).generate_state(settings.emitters)

@@ -16,6 +16,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from hritest.surrogate.inference import FastSurrogate
 from hritest.surrogate.networks import OccupancyNet, PredictNet
 
 
@@ -50,8 +51,9 @@ class Surrogate:
                  learning_rate: float, device: torch.device, seed: int) -> None:
         torch.manual_seed(seed + 42)
         self.device = device
-        self.occupancy = OccupancyNet(inputs=inputs, agents=agents).to(device)
-        self.predictor = PredictNet(inputs=inputs, agents=agents, outputs=outputs).to(device)
+        # In eval mode except while fit() trains them: predictions never update batch-norm statistics.
+        self.occupancy = OccupancyNet(inputs=inputs, agents=agents).to(device).eval()
+        self.predictor = PredictNet(inputs=inputs, agents=agents, outputs=outputs).to(device).eval()
         self.occupancy_optimizer = torch.optim.AdamW(self.occupancy.parameters(), lr=learning_rate)
         self.predictor_optimizer = torch.optim.AdamW(self.predictor.parameters(), lr=learning_rate)
         self.epochs, self.batch_size, self.seed = epochs, batch_size, seed
@@ -97,6 +99,10 @@ class Surrogate:
     def __call__(self, theta: torch.Tensor) -> torch.Tensor:
         """Predictions ``(batch, outputs)`` for ``theta`` (a tensor on :attr:`device`), in eval mode."""
         return self.predictor(theta, self.occupancy(theta))
+
+    def refolded(self) -> FastSurrogate:
+        """The networks as trained now, rewritten for fast prediction (:mod:`hritest.surrogate.inference`)."""
+        return FastSurrogate(self.occupancy, self.predictor)
 
     def predict(self, theta: np.ndarray) -> np.ndarray:
         with torch.inference_mode():

@@ -73,11 +73,17 @@ def test_the_batched_jacobian_equals_autograd_on_single_inputs(teleop_data):
     assert jacobian.shape == (4, 3, 9)
     for i, point in enumerate(points):
         x = torch.tensor(point[None], dtype=torch.float32)
-        single = torch.autograd.functional.jacobian(lambda v: objective._outputs(v)[0], x)[:, 0, :]
+        single = torch.autograd.functional.jacobian(lambda v: eager_outputs(model, objective, v)[0], x)[:, 0, :]
         np.testing.assert_allclose(jacobian[i], single.numpy(), rtol=1e-4, atol=1e-5)
     plain_obj, plain_measures = objective(points)
     np.testing.assert_allclose(obj, plain_obj, rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(measures, plain_measures, rtol=1e-5, atol=1e-6)
+
+
+def eager_outputs(model, objective, x):
+    """The inner objective computed on the trained networks themselves, not on their refolded form."""
+    predicted = model(x)
+    return torch.cat([predicted[:, :1] - objective.penalty(x)[:, None], predicted[:, 1:]], dim=1)
 
 
 def test_the_penalty_pulls_the_inner_objective_down_outside_the_bounds(teleop_data):
