@@ -4,9 +4,10 @@
         --evals 2000 --seeds 3 [--inner-iterations 1000] [--workers 2] [--device auto] [--out DIR]
 
 Prints a Markdown table (final QD-score raw and normalised, mean +- standard error over seeds,
-coverage, best objective, wall time, evaluations per second, and each algorithm's QD-score over
-Random's), and writes it with every run and a comparison report (curves and heatmaps side by
-side, one run per algorithm: its first seed) into ``--out``.
+coverage, best objective, search wall time, evaluations per second, and each algorithm's QD-score
+over Random's), and writes it with every run and a comparison report (curves and heatmaps side by
+side, one run per algorithm: its first seed) into ``--out``. Runs go seed by seed; the same
+command with the same ``--out`` reuses the runs that finished, so a stopped comparison continues.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from __future__ import annotations
 import argparse
 import csv
 import math
+import shutil
 import statistics
 import time
 from pathlib import Path
@@ -26,6 +28,14 @@ def final_row(run: Path) -> dict[str, float]:
     with open(run / "progress.csv") as handle:
         rows = list(csv.DictReader(handle))
     return {k: float(v) for k, v in rows[-1].items()}
+
+
+def finished(run: Path, evaluations: int) -> bool:
+    """Whether ``run`` is a complete run of this budget (a comparison run again reuses it)."""
+    try:
+        return final_row(run)["evaluations"] == evaluations
+    except (OSError, KeyError, IndexError, ValueError):
+        return False
 
 
 def mean_sem(values: list[float]) -> str:
@@ -48,17 +58,21 @@ def main() -> None:
     algorithms = [a.strip() for a in args.algorithms.split(",") if a.strip()]
     out = args.out or Path("benchmark-runs") / f"{args.spec.stem}-{time.strftime('%Y%m%d-%H%M%S')}"
 
-    results: dict[str, list[dict[str, float]]] = {}
-    for algorithm in algorithms:
-        for seed in range(args.seeds):
+    results: dict[str, list[dict[str, float]]] = {a: [] for a in algorithms}
+    for seed in range(args.seeds):  # seed by seed, so that a stopped comparison has every algorithm
+        for algorithm in algorithms:
             run = out / f"{algorithm}-s{seed}"
-            start = time.perf_counter()
-            qd.start(spec_file=args.spec, out=run, algorithm=algorithm, budget=args.evals, seed=seed,
-                     backend=qd.Backend(workers=args.workers),
-                     surrogate=qd.SurrogateOptions(inner_iterations=args.inner_iterations, device=args.device))
+            if finished(run, args.evals):
+                print(f"{algorithm} seed {seed}: finished earlier in {run}, reused", flush=True)
+            else:
+                if run.exists():  # a stopped run: start it again from scratch
+                    shutil.rmtree(run)
+                qd.start(spec_file=args.spec, out=run, algorithm=algorithm, budget=args.evals, seed=seed,
+                         backend=qd.Backend(workers=args.workers),
+                         surrogate=qd.SurrogateOptions(inner_iterations=args.inner_iterations, device=args.device))
             row = final_row(run)
-            row["total_seconds"] = time.perf_counter() - start
-            results.setdefault(algorithm, []).append(row)
+            row["total_seconds"] = row["wall_time"]
+            results[algorithm].append(row)
             print(f"{algorithm} seed {seed}: QD-score {row['qd_score']:,.1f} in {row['total_seconds']:.0f} s",
                   flush=True)
 

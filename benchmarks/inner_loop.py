@@ -62,8 +62,9 @@ def main() -> None:
     device = pick_device(args.device)
     rng = np.random.default_rng(0)
     n, agents = domain.space.dim, len(domain.task_cls.agents)
-    surrogate = Surrogate(inputs=n, agents=agents, outputs=1 + len(domain.measures), epochs=2, batch_size=64,
-                          learning_rate=1e-4, device=device, seed=0)
+    surrogate = Surrogate(bounds=(domain.space.lower, domain.space.upper), agents=agents,
+                          outputs=1 + len(domain.measures), epochs=2, batch_size=64, learning_rate=1e-4, device=device,
+                          seed=0)
     theta = rng.uniform(domain.space.lower, domain.space.upper, size=(256, n)).astype(np.float32)
     grids = rng.dirichlet(np.ones(1024), size=(256, agents)).reshape(256, agents, 32, 32).astype(np.float32)
     surrogate.fit(theta, grids, rng.random((256, 1 + len(domain.measures))).astype(np.float32))

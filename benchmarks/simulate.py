@@ -61,7 +61,8 @@ def thetas(domain: Domain, n: int, seed: int) -> np.ndarray:
 def run(domain: Domain, points: np.ndarray) -> dict:
     """Evaluates every theta (seed = its index); wall and CPU times, simulated ticks, statuses."""
     evaluate(domain, points[0], seed=0)  # warm-up, not counted
-    seconds, cpu, ticks, statuses = [], [], [], Counter()
+    seconds, cpu, ticks, full, statuses = [], [], [], [], Counter()
+    limit = domain.spec.task.time_limit
     for i, theta in enumerate(points):
         start, start_cpu = time.perf_counter(), time.process_time()
         evaluation, rollout = evaluate_with_rollout(domain, theta, seed=i)
@@ -70,7 +71,10 @@ def run(domain: Domain, points: np.ndarray) -> dict:
         statuses[evaluation.status] += 1
         if rollout is not None:
             ticks.append(len(rollout.time))
-    return {"seconds": np.array(seconds), "cpu": np.array(cpu), "ticks": ticks, "statuses": statuses}
+        # Episodes that ran to the time limit: the issue's "full 10 s episode" (400 ticks in teleop).
+        full.append(rollout is not None and rollout.time[-1] >= limit - 1e-9)
+    return {"seconds": np.array(seconds), "cpu": np.array(cpu), "ticks": ticks, "full": np.array(full, dtype=bool),
+            "statuses": statuses}
 
 
 def _is(func: tuple[str, int, str], suffix: str, name: str | None = None) -> bool:
@@ -140,16 +144,18 @@ def main() -> None:
         construction[name] = world_construction_ms(domain)
 
     print("| spec | scenarios | scenarios / s / core | median ms | p90 ms | max ms | median CPU ms "
-          "| median ticks | statuses |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "| median ticks | full-length episodes: n, median ms | statuses |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for name, r in rows:
         ms = r["seconds"] * 1e3
         n = len(ms)
         statuses = ", ".join(f"{k} {v / n:.0%}" for k, v in r["statuses"].most_common())
         ticks = f"{np.median(r['ticks']):.0f}" if r["ticks"] else "-"
+        full = ms[r["full"]]
+        full_cell = f"{len(full)}, {np.median(full):.1f}" if len(full) else "0, -"
         print(f"| {name} | {n} | {n / r['seconds'].sum():.1f} | {np.median(ms):.1f} | "
               f"{np.percentile(ms, 90):.1f} | {ms.max():.1f} | {np.median(r['cpu']) * 1e3:.1f} | {ticks} "
-              f"| {statuses} |")
+              f"| {full_cell} | {statuses} |")
 
     names = [name for name, _ in rows]
     print(f"\nWhere the time goes (cProfile over the first {args.profile_n} scenarios; share of "

@@ -309,8 +309,15 @@ def _glance(data: RunData) -> list:
     ]
     blocks: list = [Table(["", ""], [[k, v] for k, v in rows])]
     if data.surrogate is not None:
-        blocks.append(Table(["surrogate", "value"], [[k, v] for k, v in _flatten(data.surrogate)],
-                            caption="Surrogate accuracy (surrogate.json)"))
+        overall = {k: v for k, v in data.surrogate.items() if k not in ("per_outer_iteration", "fits")}
+        blocks.append(Table(["surrogate", "value"], [[k, v] for k, v in _flatten(overall)],
+                            caption="Surrogate accuracy on the proposals it made, before they were simulated "
+                                    "(surrogate.json)"))
+        per_outer = data.surrogate.get("per_outer_iteration", [])
+        if per_outer:
+            columns = ["outer_iteration", "held_out", "objective_mae", "right_cell_fraction", "mean_cell_distance"]
+            blocks.append(Table(columns, [[_format(row[c]) for c in columns] for row in per_outer],
+                                caption="The same, per outer iteration"))
     return blocks
 
 
@@ -320,9 +327,13 @@ def _flatten(value: Any, prefix: str = "") -> list[tuple[str, str]]:
         for k, v in value.items():
             rows += _flatten(v, f"{prefix}.{k}" if prefix else str(k))
         return rows
+    return [(prefix, _format(value))]
+
+
+def _format(value: Any) -> str:
     if isinstance(value, float):
-        return [(prefix, f"{value:.6g}")]
-    return [(prefix, json.dumps(value) if isinstance(value, (list, dict)) else str(value))]
+        return f"{value:.6g}"
+    return json.dumps(value) if isinstance(value, (list, dict)) else str(value)
 
 
 def _view(data: RunData, labelled: Sequence[int], title: str | None = None) -> figures.ArchiveView:

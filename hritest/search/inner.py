@@ -29,13 +29,13 @@ class SurrogateObjective:
     plus, where the spec has several regions, each object's nearest region (no gradient)."""
 
     def __init__(self, domain: Domain, surrogate: Surrogate) -> None:
-        self.device = surrogate.device
+        self.device, self.clip = surrogate.device, surrogate.clip
         self.network = surrogate.refolded()  # the surrogate as trained now; rebuilt each outer iteration
         self.penalty = Penalty(domain.repair.penalty_terms(), surrogate.device)
         self.region_axes = len(archives.workspace_objects(domain)) > 0
 
     def _outputs(self, x: torch.Tensor) -> torch.Tensor:
-        predicted = self.network(x)
+        predicted = self.network(self.clip(x))
         return torch.cat([predicted[:, :1] - self.penalty(x)[:, None], predicted[:, 1:]], dim=1)
 
     def __call__(self, solutions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -70,13 +70,13 @@ class SurrogateAssisted:
         self.iterations = options.inner_iterations or settings.inner_iterations
         self.initial = settings.initial_evaluations
         self.rng = np.random.default_rng(seed)
-        self.surrogate = Surrogate(inputs=domain.space.dim, agents=len(domain.task_cls.agents),
+        self.surrogate = Surrogate(bounds=(domain.space.lower, domain.space.upper), agents=len(domain.task_cls.agents),
                                    outputs=1 + len(domain.measures), epochs=settings.epochs,
                                    batch_size=settings.batch_size, learning_rate=settings.learning_rate,
                                    device=pick_device(options.device), seed=seed)
         self.outer = 0
         self.pending_predictions: np.ndarray | None = None
-        self.held_out: list[tuple[list[float], list[float]]] = []  # (predicted, true) per evaluation
+        self.held_out: list[tuple[int, list[float], list[float]]] = []  # (outer iteration, predicted, true)
         self.fits: list[dict] = []
 
     def ask(self, search: Search) -> np.ndarray:
@@ -106,26 +106,33 @@ class SurrogateAssisted:
         for record, predicted in zip(records, self.pending_predictions):
             if record["status"] == "ok":
                 true = [record["search_objective"] / (hi - lo), *record["measures"]]
-                self.held_out.append((predicted.tolist(), true))
+                self.held_out.append((self.outer, predicted.tolist(), true))
         search.run_dir.write_text("surrogate.json", json.dumps(self.accuracy(search.domain), indent=2))
 
     def accuracy(self, domain: Domain) -> dict:
-        """Held-out errors the paper's way: MAE per output, right-cell fraction, cell distance."""
+        """Held-out errors the paper's way (MAE per output, right-cell fraction, cell distance),
+        over every proposal so far and per outer iteration, with each training round's losses."""
         if not self.held_out:
             return {"held_out": 0, "fits": self.fits}
-        predicted = np.array([p for p, _ in self.held_out])
-        true = np.array([t for _, t in self.held_out])
-        lo, hi = domain.spec.objective.range
-        scale = np.array([hi - lo] + [1.0] * len(domain.measures))
-        errors = np.abs(predicted - true) * scale
-        grid = archives.result_archive(domain, seed=0)
-        predicted_cells = np.array(np.unravel_index(grid.index_of(predicted[:, 1:]), grid.dims)).T
-        true_cells = np.array(np.unravel_index(grid.index_of(true[:, 1:]), grid.dims)).T
-        return {
-            "held_out": len(true),
-            "objective_mae": float(errors[:, 0].mean()),
-            "measure_mae": {m.name: float(errors[:, i + 1].mean()) for i, m in enumerate(domain.measures)},
-            "right_cell_fraction": float(np.all(predicted_cells == true_cells, axis=1).mean()),
-            "mean_cell_distance": float(np.abs(predicted_cells - true_cells).sum(axis=1).mean()),
-            "fits": self.fits,
-        }
+        outers = sorted({outer for outer, _, _ in self.held_out})
+        per_outer = [{"outer_iteration": outer, **_errors(domain, [h for h in self.held_out if h[0] == outer])}
+                     for outer in outers]
+        return {**_errors(domain, self.held_out), "per_outer_iteration": per_outer, "fits": self.fits}
+
+
+def _errors(domain: Domain, held_out: list[tuple[int, list[float], list[float]]]) -> dict:
+    predicted = np.array([p for _, p, _ in held_out])
+    true = np.array([t for _, _, t in held_out])
+    lo, hi = domain.spec.objective.range
+    scale = np.array([hi - lo] + [1.0] * len(domain.measures))
+    errors = np.abs(predicted - true) * scale
+    grid = archives.result_archive(domain, seed=0)
+    predicted_cells = np.array(np.unravel_index(grid.index_of(predicted[:, 1:]), grid.dims)).T
+    true_cells = np.array(np.unravel_index(grid.index_of(true[:, 1:]), grid.dims)).T
+    return {
+        "held_out": len(true),
+        "objective_mae": float(errors[:, 0].mean()),
+        "measure_mae": {m.name: float(errors[:, i + 1].mean()) for i, m in enumerate(domain.measures)},
+        "right_cell_fraction": float(np.all(predicted_cells == true_cells, axis=1).mean()),
+        "mean_cell_distance": float(np.abs(predicted_cells - true_cells).sum(axis=1).mean()),
+    }

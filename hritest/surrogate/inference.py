@@ -20,6 +20,7 @@ Outputs equal the eager networks' to float32 rounding (``tests/surrogate``).
 
 from __future__ import annotations
 
+import copy
 import ctypes
 import sys
 
@@ -122,25 +123,32 @@ def _fold_sequential(layers: nn.Sequential) -> nn.Sequential:
 
 
 class FastPredict(nn.Module):
-    """:class:`PredictNet` in eval mode with its batch norms folded."""
+    """:class:`PredictNet` in eval mode with its batch norms folded, and ``output * scale + shift``
+    folded into its last layer."""
 
-    def __init__(self, net: PredictNet) -> None:
+    def __init__(self, net: PredictNet, *, scale: torch.Tensor, shift: torch.Tensor) -> None:
         super().__init__()
         self.theta, self.grid, self.head = (_fold_sequential(s) for s in (net.theta, net.grid, net.head))
+        last = self.head[-1] = copy.deepcopy(self.head[-1])
+        with torch.no_grad():
+            last.weight.mul_(scale[:, None])
+            last.bias.mul_(scale).add_(shift)
 
     def forward(self, theta: torch.Tensor, occupancy: torch.Tensor) -> torch.Tensor:
         return self.head(torch.cat([self.theta(theta), self.grid(occupancy)], dim=1))
 
 
 class FastSurrogate(nn.Module):
-    """``theta -> predictions`` of a trained surrogate's two networks, refolded. A snapshot: build
-    a new one after training."""
+    """``theta -> predictor(theta, occupancy(theta)) * scale + shift`` of a trained surrogate's two
+    networks, refolded. A snapshot: build a new one after training."""
 
-    def __init__(self, occupancy: OccupancyNet, predictor: PredictNet) -> None:
+    def __init__(self, occupancy: OccupancyNet, predictor: PredictNet, *, scale: torch.Tensor,
+                 shift: torch.Tensor) -> None:
         super().__init__()
         if occupancy.training or predictor.training:
             raise ValueError("refold the networks in eval mode: batch norm folds only with fixed statistics")
-        self.occupancy, self.predictor = FastOccupancy(occupancy), FastPredict(predictor)
+        self.occupancy = FastOccupancy(occupancy)
+        self.predictor = FastPredict(predictor, scale=scale, shift=shift)
         self.outputs = predictor.head[-1].out_features
         self.requires_grad_(False)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import base64
 import csv
+import json
 import re
 import shutil
 from pathlib import Path
@@ -163,8 +164,15 @@ def test_bad_input_exits_2(run, tmp_path):
 def test_surrogate_accuracy_is_tabled_when_the_run_has_one(calm_run, tmp_path):
     run = tmp_path / "run"
     shutil.copytree(calm_run, run)
-    (run / "surrogate.json").write_text('{"objective": {"mae": 0.123456789, "r2": 0.9}, "trained_on": 100}')
+    per_outer = [{"outer_iteration": 1, "held_out": 99, "objective_mae": 3.25, "right_cell_fraction": 0.0101,
+                  "mean_cell_distance": 7.5},
+                 {"outer_iteration": 2, "held_out": 97, "objective_mae": 0.987654321, "right_cell_fraction": 0.25,
+                  "mean_cell_distance": 2.0}]
+    (run / "surrogate.json").write_text(json.dumps(
+        {"held_out": 196, "measure_mae": {"goal_distance": 0.123456789}, "per_outer_iteration": per_outer,
+         "fits": [{"outer_iteration": 1, "samples": 100, "occupancy_loss": 3.4, "predictor_loss": 0.01}]}))
     page = write_report(run, recordings=0).read_text()
-    assert "Surrogate accuracy (surrogate.json)" in page
-    for text in ("objective.mae", "0.123457", "objective.r2", "trained_on"):
+    assert "Surrogate accuracy on the proposals it made" in page
+    for text in ("measure_mae.goal_distance", "0.123457", "196", "The same, per outer iteration", "0.987654"):
         assert text in page
+    assert "occupancy_loss" not in page  # training losses stay in the file

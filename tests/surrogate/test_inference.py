@@ -28,20 +28,24 @@ def trained_looking(inputs: int, agents: int, outputs: int, seed: int) -> tuple[
 @pytest.mark.parametrize(("inputs", "agents", "outputs"), [(9, 1, 3), (6, 2, 3), (8, 2, 4)])
 def test_refolded_predictions_and_grids_equal_the_networks(inputs, agents, outputs):
     occupancy, predictor = trained_looking(inputs, agents, outputs, seed=inputs)
-    fast = FastSurrogate(occupancy, predictor)
+    scale, shift = torch.rand(outputs) + 0.1, torch.randn(outputs)
+    fast = FastSurrogate(occupancy, predictor, scale=scale, shift=shift)
     x = torch.randn(37, inputs)
     with torch.no_grad():
         grids = occupancy(x)
+        before = predictor(x, grids)
         torch.testing.assert_close(fast.occupancy(x), grids, rtol=1e-4, atol=1e-5)
-        torch.testing.assert_close(fast(x), predictor(x, grids), rtol=1e-4, atol=1e-5)
+        torch.testing.assert_close(fast(x), before * scale + shift, rtol=1e-4, atol=1e-5)
+        torch.testing.assert_close(predictor(x, grids), before)  # the trained networks are left as they were
     assert fast.outputs == outputs
 
 
 def test_refolded_gradients_equal_the_networks():
     occupancy, predictor = trained_looking(9, 1, 3, seed=1)
-    fast = FastSurrogate(occupancy, predictor)
+    scale, shift = torch.tensor([2.0, 0.5, 0.1]), torch.tensor([1.0, -1.0, 0.0])
+    fast = FastSurrogate(occupancy, predictor, scale=scale, shift=shift)
     x = torch.randn(5, 9)
-    eager = torch.autograd.functional.jacobian(lambda v: predictor(v, occupancy(v)).sum(0), x)
+    eager = torch.autograd.functional.jacobian(lambda v: (predictor(v, occupancy(v)) * scale + shift).sum(0), x)
     refolded = torch.autograd.functional.jacobian(lambda v: fast(v).sum(0), x)
     torch.testing.assert_close(refolded, eager, rtol=1e-4, atol=1e-5)
 
@@ -49,4 +53,4 @@ def test_refolded_gradients_equal_the_networks():
 def test_refolding_a_network_in_training_mode_is_refused():
     occupancy, predictor = trained_looking(9, 1, 3, seed=2)
     with pytest.raises(ValueError, match="eval mode"):
-        FastSurrogate(occupancy.train(), predictor)
+        FastSurrogate(occupancy.train(), predictor, scale=torch.ones(3), shift=torch.zeros(3))

@@ -22,8 +22,9 @@ CPU = torch.device("cpu")
 
 
 def surrogate_for(domain, *, epochs=5, seed=0) -> Surrogate:
-    return Surrogate(inputs=domain.space.dim, agents=len(domain.task_cls.agents), outputs=1 + len(domain.measures),
-                     epochs=epochs, batch_size=16, learning_rate=1e-3, device=CPU, seed=seed)
+    return Surrogate(bounds=(domain.space.lower, domain.space.upper), agents=len(domain.task_cls.agents),
+                     outputs=1 + len(domain.measures), epochs=epochs, batch_size=16, learning_rate=1e-3, device=CPU,
+                     seed=seed)
 
 
 @pytest.mark.parametrize(("spec", "inputs", "agents", "outputs"),
@@ -139,3 +140,25 @@ def test_a_tiny_run_completes_and_resumes(tmp_path, algorithm):
     again = qd.resume(run_path=tmp_path / "run", backend=backend)
     assert again.state["evaluations"] == 80
     assert sorted(r["index"] for r in RunDirectory.open(tmp_path / "run").evaluations()) == list(range(80))
+
+
+def test_outside_the_bounds_the_prediction_is_that_of_the_clipped_theta(teleop_data):
+    domain, theta, grids, targets = teleop_data
+    model = surrogate_for(domain, epochs=2)
+    model.fit(theta, grids, targets)
+    outside = theta[:3].astype(np.float64).copy()
+    outside[:, 0] += 1.0                       # g0x a metre past its upper bound
+    outside[:, 5] -= 0.2                       # a waypoint offset past its lower bound
+    clipped = np.clip(outside, domain.space.lower, domain.space.upper)
+    np.testing.assert_allclose(model.predict(outside), model.predict(clipped), rtol=1e-6)
+    assert not np.allclose(model.predict(outside), model.predict(theta[:3]))
+
+
+def test_targets_are_learned_standardised_and_predicted_in_their_own_units(teleop_data):
+    domain, theta, grids, targets = teleop_data
+    model = surrogate_for(domain, epochs=30)
+    model.fit(theta, grids, targets)
+    torch.testing.assert_close(model.target_mean, torch.tensor(targets.mean(axis=0)))
+    predicted = model.predict(theta)
+    # In the targets' units: each output's mean near the data's own, not near the standardised zero.
+    assert np.all(np.abs(predicted.mean(axis=0) - targets.mean(axis=0)) < 0.5 * targets.std(axis=0))
