@@ -3,8 +3,9 @@
 Each outer iteration builds a fresh archive and fresh emitters at x0 and runs ``iterations``
 rounds of CMA-MAE (SAS) or CMA-MAEGA (DSAS) where every batch, from all emitters at once, is
 scored by one forward pass of the surrogate (and, for DSAS, the objective and measure gradients
-of the emitters' solution points by one backward pass over stacked copies of them). The elites are then
-downsampled, one random elite per block of cells, to choose what the real simulator evaluates.
+of the emitters' solution points by one backward pass over stacked copies of them). The elites
+are then downsampled, one random elite per block of cells, to choose what the real simulator
+evaluates.
 """
 
 from __future__ import annotations

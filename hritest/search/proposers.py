@@ -70,10 +70,11 @@ class SurrogateAssisted:
         self.iterations = options.inner_iterations or settings.inner_iterations
         self.initial = settings.initial_evaluations
         self.rng = np.random.default_rng(seed)
-        self.surrogate = Surrogate(bounds=(domain.space.lower, domain.space.upper), agents=len(domain.task_cls.agents),
-                                   outputs=1 + len(domain.measures), epochs=settings.epochs,
-                                   batch_size=settings.batch_size, learning_rate=settings.learning_rate,
-                                   device=pick_device(options.device), seed=seed)
+        self.surrogate = Surrogate(bounds=(domain.space.lower, domain.space.upper),
+                                   agents=len(domain.task_cls.agents), outputs=1 + len(domain.measures),
+                                   epochs=settings.epochs, batch_size=settings.batch_size,
+                                   learning_rate=settings.learning_rate, device=pick_device(options.device),
+                                   seed=seed)
         self.outer = 0
         self.pending_predictions: np.ndarray | None = None
         self.held_out: list[tuple[int, list[float], list[float]]] = []  # (outer iteration, predicted, true)

@@ -1,4 +1,4 @@
-"""The trained surrogate refolded for the inner loop: the same function, about 3x cheaper on a CPU.
+"""The trained surrogate refolded for the inner loop: the same function, cheaper on a CPU.
 
 The inner loop asks the surrogate for 296 predictions ten thousand times per outer iteration,
 always in eval mode, so the networks can be rewritten once per outer iteration into an
@@ -29,6 +29,7 @@ from torch import nn
 from torch.nn.utils.fusion import fuse_conv_bn_eval, fuse_conv_bn_weights, fuse_linear_bn_eval
 
 from hritest.surrogate.networks import OccupancyNet, PredictNet
+
 
 def keep_freed_memory() -> None:
     """Lets glibc keep the memory that each forward pass frees, for the next one to reuse.

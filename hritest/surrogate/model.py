@@ -16,12 +16,13 @@ constant on the teleoperation spec (``benchmarks/README.md``, "Search quality"):
   at zero and moving about 1e-4 per AdamW step, had not reached after 100 epochs: trained the
   paper's way on 500 random scenarios, its held-out error on the variation was 6.5x that of
   predicting the mean; standardised, 0.7x.
-* theta is clipped into the parameter bounds before the networks see it. A ReLU network extrapolates linearly, so outside the region
-it was trained on it predicts ever larger objectives and new measure values, and the inner loop
-followed them: in the first outer iteration on the teleoperation spec (100 samples) its proposals
-lay up to 6 m outside 16 cm-wide bounds and were all repaired onto the bounds' corners. Clipped,
-the prediction is flat outside the bounds, so nothing but the penalty (which says how far out a
-proposal is) changes there, and the inner search stays where the simulator's data is.
+* theta is clipped into the parameter bounds before the networks see it. A ReLU network
+  extrapolates linearly, so outside the region it was trained on it predicts ever larger
+  objectives and new measure values, and the inner loop followed them: in the first outer
+  iteration on the teleoperation spec (100 samples) its proposals lay up to 6 m outside
+  16 cm-wide bounds, and the repair put them all on the bounds' corners. Clipped, the prediction
+  is flat outside the bounds, so only the penalty (which grows with the distance out) changes
+  there, and the inner search stays where the simulator's data is.
 """
 
 from __future__ import annotations
