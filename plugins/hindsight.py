@@ -1,29 +1,30 @@
 """Hindsight-optimisation shared autonomy (Javdani et al.): Huber values, belief and twists.
 
-Pure-Python re-implementation of the reference's ``HuberAssistancePolicy``,
-``AssistancePolicyOneGoal``, ``AssistancePolicy`` and ``GoalPredictor``. The robot treats the
-human as noisily optimal with a Huber cost-to-go toward each target pose; the first-order
-approximation of hindsight optimisation makes the assisted action a belief-weighted average of
-per-goal straight-line actions.
+A re-implementation of the reference's ``HuberAssistancePolicy``, ``AssistancePolicyOneGoal``,
+``AssistancePolicy`` and ``GoalPredictor``. The robot treats the human as noisily optimal with a
+Huber cost-to-go toward each target pose; the first-order approximation of hindsight
+optimisation makes the assisted action a belief-weighted average of per-goal straight-line
+actions.
 
 Shapes: a pose is a 4x4 homogeneous matrix; ``targets`` may carry leading batch axes
 (``(..., 4, 4)``) and every per-target function maps over them. ``goals_targets`` is
 ``(n_goals, n_targets, 4, 4)``. A twist is ``[vx, vy, vz, wx, wy, wz]`` in the world frame.
 
 Speed: a robot evaluates this every 25 ms tick of every scenario, for a handful of targets (two
-per goal). At that size numpy's overhead of about a microsecond per call is the whole cost, and
-plain floats are several times faster, so the per-target math works on floats: target poses are
-prepared once (:func:`prepare_targets`: positions and orientation quaternions), the rotation
-from a pose to a target is one quaternion product rather than a rotation-matrix conversion, and
-:func:`lookahead` computes once what the belief update and the actions both need. The functions
-that take and return arrays (:func:`target_value`, :func:`goal_values`, :func:`target_action`,
-...) wrap that core; every function taking ``targets`` accepts 4x4 poses or :class:`Targets`.
+per goal), so the per-target math is compiled with numba (a dependency of pyribs already):
+interpreted, it was more than half of a teleoperation episode's time, even written on plain
+floats. Target poses are prepared once per episode (:func:`prepare_targets`: positions and
+orientation quaternions), the rotation from a pose to a target is one quaternion product, and
+:func:`lookahead` computes once what the belief update and the actions both need;
+:func:`teleop_step` is a whole robot tick in one call. The kernels (``_``-prefixed,
+:data:`hritest.compiled.kernel`) take and return plain arrays; the public functions wrap them,
+and every function taking ``targets`` accepts 4x4 poses or :class:`Targets`.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Collection, Sequence
+from collections.abc import Collection
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Literal, NamedTuple
@@ -31,13 +32,11 @@ from typing import Literal, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 
+from hritest.compiled import kernel
+
 #: Orientation of every goal pose: rows ``[[0, 0, 1], [1, 0, 0], [0, 1, 0]]``.
 GOAL_ROTATION = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 _YAW_180 = np.diag([-1.0, -1.0, 1.0])
-
-Vector = tuple[float, float, float]
-Quaternion = tuple[float, float, float, float]  # (x, y, z, w)
-
 
 @dataclass(frozen=True, kw_only=True)
 class HuberConstants:
@@ -94,8 +93,22 @@ class HuberConstants:
         """``(a_r, delta_r, c_r)``."""
         return self.rotation_linear, self.rotation_delta, self.rotation_constant
 
+    @cached_property
+    def vector(self) -> np.ndarray:
+        """Every constant in one array, in the order the kernels read them (``_A_T`` ...)."""
+        return np.array([
+            self.translation_linear, self.translation_delta, self.translation_constant,
+            self.rotation_linear, self.rotation_delta, self.rotation_constant, self.rotation_multiplier,
+            self.robot_translation_cost, self.robot_rotation_cost, self.action_apply_time,
+            self.translation_slowdown, self.rotation_slowdown,
+        ])
+
 
 DEFAULT_CONSTANTS = HuberConstants()
+
+
+# Positions of the constants in HuberConstants.vector, compile-time constants in the kernels.
+_A_T, _D_T, _C_T, _A_R, _D_R, _C_R, _K_R, _COST_T, _COST_R, _APPLY, _SLOW_T, _SLOW_R = range(12)
 
 
 # --- poses and targets -----------------------------------------------------------------------
@@ -122,13 +135,13 @@ class Targets(NamedTuple):
 
     Attributes:
         shape: the batch shape of the poses, e.g. ``(n_goals, n_targets)``.
-        positions: one ``(x, y, z)`` per target, in C order over ``shape``.
-        quaternions: one unit quaternion ``(x, y, z, w)`` of the orientation per target.
+        positions: ``(n, 3)``, one position per target, in C order over ``shape``.
+        quaternions: ``(n, 4)``, the unit quaternion ``(x, y, z, w)`` of each target's orientation.
     """
 
     shape: tuple[int, ...]
-    positions: list[Vector]
-    quaternions: list[Quaternion]
+    positions: np.ndarray
+    quaternions: np.ndarray
 
 
 def prepare_targets(poses: ArrayLike) -> Targets:
@@ -137,8 +150,8 @@ def prepare_targets(poses: ArrayLike) -> Targets:
     flat = poses.reshape(-1, 4, 4)
     return Targets(
         shape=poses.shape[:-2],
-        positions=[tuple(p) for p in flat[:, :3, 3].tolist()],
-        quaternions=[_quaternion(r) for r in flat[:, :3, :3].tolist()],
+        positions=np.ascontiguousarray(flat[:, :3, 3]),
+        quaternions=np.array([_quaternion(np.ascontiguousarray(pose[:3, :3])) for pose in flat]).reshape(-1, 4),
     )
 
 
@@ -146,25 +159,29 @@ def _prepared(targets: Targets | ArrayLike) -> Targets:
     return targets if isinstance(targets, Targets) else prepare_targets(targets)
 
 
-def _quaternion(r: list[list[float]]) -> Quaternion:
-    """Unit quaternion ``(x, y, z, w)`` of a 3x3 rotation given as nested lists.
+def _pose(pose: ArrayLike) -> np.ndarray:
+    return np.asarray(pose, dtype=np.float64)
+
+
+@kernel
+def _quaternion(r: np.ndarray) -> np.ndarray:
+    """Unit quaternion ``(x, y, z, w)`` of a 3x3 rotation matrix.
 
     Markley's method, as scipy's ``Rotation.from_matrix``: it builds from the largest of the
     diagonal and the trace, so it stays accurate at every angle, half turns included.
     """
-    (a, b, c), (d, e, f), (g, h, i) = r
+    a, b, c, d, e, f, g, h, i = r[0, 0], r[0, 1], r[0, 2], r[1, 0], r[1, 1], r[1, 2], r[2, 0], r[2, 1], r[2, 2]
     trace = a + e + i
     largest = max(a, e, i, trace)
     if largest == a:
-        q = (1.0 - trace + 2.0 * a, d + b, g + c, h - f)
+        q = np.array([1.0 - trace + 2.0 * a, d + b, g + c, h - f])
     elif largest == e:
-        q = (d + b, 1.0 - trace + 2.0 * e, h + f, c - g)
+        q = np.array([d + b, 1.0 - trace + 2.0 * e, h + f, c - g])
     elif largest == i:
-        q = (g + c, h + f, 1.0 - trace + 2.0 * i, d - b)
+        q = np.array([g + c, h + f, 1.0 - trace + 2.0 * i, d - b])
     else:
-        q = (h - f, c - g, d - b, 1.0 + trace)
-    norm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    return (q[0] / norm, q[1] / norm, q[2] / norm, q[3] / norm)
+        q = np.array([h - f, c - g, d - b, 1.0 + trace])
+    return q / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
 
 
 def apply_twist(pose: np.ndarray, twist: ArrayLike, duration: float) -> np.ndarray:
@@ -178,116 +195,125 @@ def apply_twist(pose: np.ndarray, twist: ArrayLike, duration: float) -> np.ndarr
     Returns:
         A new 4x4 pose; ``pose`` is not modified.
     """
-    twist = np.asarray(twist, dtype=np.float64)
-    out = np.array(pose, dtype=np.float64)
+    return _apply_twist(_pose(pose), np.asarray(twist, dtype=np.float64), float(duration))
+
+
+@kernel
+def _apply_twist(pose: np.ndarray, twist: np.ndarray, duration: float) -> np.ndarray:
+    out = pose.copy()
     out[:3, 3] += duration * twist[:3]
     rotvec = duration * twist[3:]
-    angle = math.sqrt(rotvec @ rotvec)
+    angle = math.sqrt(rotvec[0] * rotvec[0] + rotvec[1] * rotvec[1] + rotvec[2] * rotvec[2])
     if angle > 0.0:
         x, y, z = rotvec / angle
         k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
         turn = np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
-        out[:3, :3] = turn @ out[:3, :3]
+        out[:3, :3] = turn @ np.ascontiguousarray(pose[:3, :3])
     return out
 
 
-class Offset(NamedTuple):
-    """From a pose to one target.
-
-    Attributes:
-        translation: target position minus the pose's.
-        rotation: quaternion of the world-frame rotation taking the pose's orientation to the
-            target's.
-        distance: translation distance (m).
-        angle: short-way rotation angle (rad, in [0, pi]).
-    """
-
-    translation: Vector
-    rotation: Quaternion
-    distance: float
-    angle: float
+#: Columns of an offsets array (:func:`offsets`): from a pose to one target per row.
+TRANSLATION = slice(0, 3)  #: target position minus the pose's
+ROTATION = slice(3, 7)  #: quaternion of the world-frame rotation from the pose's orientation to the target's
+DISTANCE = 7  #: translation distance (m)
+ANGLE = 8  #: short-way rotation angle (rad, in [0, pi])
 
 
-def offsets(pose: np.ndarray, targets: Targets | ArrayLike) -> list[Offset]:
-    """The :class:`Offset` from ``pose`` to each of ``targets`` (flat, in C order)."""
+def offsets(pose: np.ndarray, targets: Targets | ArrayLike) -> np.ndarray:
+    """``(n, 9)``: from ``pose`` to each of ``targets`` (flat, in C order); columns
+    :data:`TRANSLATION`, :data:`ROTATION`, :data:`DISTANCE`, :data:`ANGLE`."""
     targets = _prepared(targets)
-    return _offsets(pose[:3, 3].tolist(), targets, _rotations(_quaternion(pose[:3, :3].tolist()), targets))
+    return _pose_offsets(_pose(pose), targets.positions, targets.quaternions)
 
 
-def _rotations(orientation: Quaternion, targets: Targets) -> list[tuple[Quaternion, float]]:
-    """Per target, the world-frame rotation taking ``orientation`` to the target's, as a
-    quaternion ``target * conj(orientation)``, and its angle."""
+@kernel
+def _pose_offsets(pose: np.ndarray, positions: np.ndarray, quaternions: np.ndarray) -> np.ndarray:
+    return _offsets(pose[:3, 3].copy(), _quaternion(np.ascontiguousarray(pose[:3, :3])), positions, quaternions)
+
+
+@kernel
+def _offsets(position: np.ndarray, orientation: np.ndarray, positions: np.ndarray,
+             quaternions: np.ndarray) -> np.ndarray:
     x, y, z, w = orientation
-    out = []
-    for a, b, c, d in targets.quaternions:
-        # Grouped so that equal orientations give exactly the identity.
+    out = np.empty((len(positions), 9))
+    for t in range(len(positions)):
+        a, b, c, d = quaternions[t]
+        # target * conj(orientation), grouped so that equal orientations give exactly the identity.
         rx = (w * a - x * d) + (y * c - z * b)
         ry = (w * b - y * d) + (z * a - x * c)
         rz = (w * c - z * d) + (x * b - y * a)
         rw = x * a + y * b + z * c + w * d
+        dx, dy, dz = positions[t, 0] - position[0], positions[t, 1] - position[1], positions[t, 2] - position[2]
+        out[t, 0], out[t, 1], out[t, 2] = dx, dy, dz
+        out[t, 3], out[t, 4], out[t, 5], out[t, 6] = rx, ry, rz, rw
+        out[t, 7] = math.sqrt(dx * dx + dy * dy + dz * dz)
         # 2 atan2(|sin(a/2)|, |cos(a/2)|): accurate at every angle, unlike an arccos.
-        out.append(((rx, ry, rz, rw), 2.0 * math.atan2(math.hypot(rx, ry, rz), abs(rw))))
+        out[t, 8] = 2.0 * math.atan2(math.sqrt(rx * rx + ry * ry + rz * rz), abs(rw))
     return out
 
 
-def _offsets(position: Sequence[float], targets: Targets, rotations: list[tuple[Quaternion, float]]) -> list[Offset]:
-    px, py, pz = position
-    out = []
-    for (tx, ty, tz), (rotation, angle) in zip(targets.positions, rotations):
-        dx, dy, dz = tx - px, ty - py, tz - pz
-        out.append(Offset((dx, dy, dz), rotation, _norm(dx, dy, dz), angle))
-    return out
+def distances(pose: np.ndarray, targets: Targets | ArrayLike) -> np.ndarray:
+    """The :func:`offsets` distances alone (flat, the same numbers)."""
+    return offsets(pose, targets)[:, DISTANCE]
 
 
-def _norm(dx: float, dy: float, dz: float) -> float:
-    return math.sqrt(dx * dx + dy * dy + dz * dz)
+def within(pose: np.ndarray, targets: Targets | ArrayLike, *, distance: float, angle: float) -> bool:
+    """Whether ``pose`` is closer than ``distance`` (m) and ``angle`` (rad) to any of ``targets``."""
+    targets = _prepared(targets)
+    return _within(_pose(pose), targets.positions, targets.quaternions, float(distance), float(angle))
 
 
-def distances(pose: np.ndarray, targets: Targets | ArrayLike) -> list[float]:
-    """The :class:`Offset` distances alone (flat, the same numbers): no rotations, so cheaper."""
-    px, py, pz = pose[:3, 3].tolist()
-    return [_norm(tx - px, ty - py, tz - pz) for tx, ty, tz in _prepared(targets).positions]
-
-
-def _array(values: list, shape: tuple[int, ...]) -> np.ndarray:
-    return np.array(values, dtype=np.float64).reshape(shape + np.shape(values)[1:])
+@kernel
+def _within(pose: np.ndarray, positions: np.ndarray, quaternions: np.ndarray, distance: float, angle: float) -> bool:
+    towards = _pose_offsets(pose, positions, quaternions)
+    for t in range(len(towards)):
+        if towards[t, DISTANCE] < distance and towards[t, ANGLE] < angle:
+            return True
+    return False
 
 
 def pose_distances(pose: np.ndarray, targets: Targets | ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Translation distance (m) and rotation angle (rad) from ``pose`` to each target."""
     targets = _prepared(targets)
     towards = offsets(pose, targets)
-    return (_array([o.distance for o in towards], targets.shape),
-            _array([o.angle for o in towards], targets.shape))
+    return towards[:, DISTANCE].reshape(targets.shape), towards[:, ANGLE].reshape(targets.shape)
 
 
 # --- Huber value, one-step cost and slope ---------------------------------------------------
 
 
+@kernel
 def _huber(x: float, linear: float, delta: float, constant: float) -> float:
     if x <= delta:
         return 0.5 * (linear / delta) * (x * x) + constant * x
     return (linear + constant) * x - 0.5 * linear * delta
 
 
+@kernel
 def _huber_slope(x: float, linear: float, delta: float, constant: float) -> float:
     return linear + constant if x > delta else (linear / delta) * x + constant
 
 
-def _value(towards: Offset, c: HuberConstants) -> float:
-    """``V_t(d) + k_r V_r(theta)``."""
-    return _huber(towards.distance, *c.translation) + c.rotation_multiplier * _huber(towards.angle, *c.rotation)
+@kernel
+def _values(towards: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """``V_t(d) + k_r V_r(theta)`` per offset."""
+    out = np.empty(len(towards))
+    for t in range(len(towards)):
+        out[t] = (_huber(towards[t, DISTANCE], k[_A_T], k[_D_T], k[_C_T])
+                  + k[_K_R] * _huber(towards[t, ANGLE], k[_A_R], k[_D_R], k[_C_R]))
+    return out
 
 
-def _step_cost(towards: Offset, c: HuberConstants) -> float:
-    """Cost of acting for Delta seconds from here: Delta times the Huber slope."""
-    slope_t = _huber_slope(towards.distance, *c.translation)
-    return c.action_apply_time * (slope_t + c.rotation_multiplier * _huber_slope(towards.angle, *c.rotation))
+@kernel
+def _step_cost(towards: np.ndarray, t: int, k: np.ndarray) -> float:
+    """Cost of acting for Delta seconds from offset ``t``: Delta times the Huber slope."""
+    slope_t = _huber_slope(towards[t, DISTANCE], k[_A_T], k[_D_T], k[_C_T])
+    return k[_APPLY] * (slope_t + k[_K_R] * _huber_slope(towards[t, ANGLE], k[_A_R], k[_D_R], k[_C_R]))
 
 
-def huber_values(towards: list[Offset], constants: HuberConstants = DEFAULT_CONSTANTS) -> list[float]:
-    """Huber cost-to-go ``V_t(d) + k_r V_r(theta)`` of each of the offsets."""
-    return [_value(o, constants) for o in towards]
+def huber_values(towards: np.ndarray, constants: HuberConstants = DEFAULT_CONSTANTS) -> np.ndarray:
+    """Huber cost-to-go ``V_t(d) + k_r V_r(theta)`` of each row of an :func:`offsets` array."""
+    return _values(towards, constants.vector)
 
 
 def target_value(
@@ -306,42 +332,44 @@ def target_value(
         ``target.shape[:-2]`` values (a 0-d array for a single target).
     """
     target = _prepared(target)
-    return _array(huber_values(offsets(pose, target), constants), target.shape)
+    return huber_values(offsets(pose, target), constants).reshape(target.shape)
 
 
 class Lookahead(NamedTuple):
     """Every target's value now and after the user's twist: what belief and action both need.
 
-    Lists are flat over the targets, in C order over ``shape``.
+    Arrays are flat over the targets, in C order over ``shape``.
 
     Attributes:
         shape: the targets' batch shape.
         values: V at the pose.
         q_values: Q of the twist: one-step cost from the pose plus V after the action.
-        after: :class:`Offset` from the pose the twist leads to in ``action_apply_time``.
+        after: :func:`offsets` from the pose the twist leads to in ``action_apply_time``.
         values_after: V there.
     """
 
     shape: tuple[int, ...]
-    values: list[float]
-    q_values: list[float]
-    after: list[Offset]
-    values_after: list[float]
+    values: np.ndarray
+    q_values: np.ndarray
+    after: np.ndarray
+    values_after: np.ndarray
 
-    def per_goal(self) -> tuple[list[float], list[float], list[int]]:
+    def per_goal(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Goal-level ``(V_g, Q_g, best_target_index)`` for ``(n_goals, n_targets)`` targets.
 
         A goal's V and Q are those of its target with the minimal V at the pose (the first of
         ties, as numpy's argmin).
         """
-        per = self.shape[-1]
-        best = [_argmin(self.values[g * per:(g + 1) * per]) for g in range(self.shape[0])]
-        rows = [g * per + b for g, b in enumerate(best)]
-        return [self.values[r] for r in rows], [self.q_values[r] for r in rows], best
+        return _per_goal(self.values, self.q_values, self.shape[-1])
 
 
-def _argmin(values: list[float]) -> int:
-    return min(range(len(values)), key=values.__getitem__)
+@kernel
+def _per_goal(values: np.ndarray, q_values: np.ndarray, per: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    best = np.empty(len(values) // per, np.intp)
+    for g in range(len(best)):
+        best[g] = np.argmin(values[g * per:(g + 1) * per])
+    rows = np.arange(len(best)) * per + best
+    return values[rows], q_values[rows], best
 
 
 def lookahead(
@@ -351,23 +379,26 @@ def lookahead(
     constants: HuberConstants = DEFAULT_CONSTANTS,
 ) -> Lookahead:
     """The :class:`Lookahead` of holding ``twist`` at ``pose`` for ``action_apply_time``."""
-    c, targets = constants, _prepared(targets)
-    rotations = _rotations(_quaternion(pose[:3, :3].tolist()), targets)
-    position = pose[:3, 3].tolist()
-    now = _offsets(position, targets, rotations)
-    velocity, spin = np.asarray(twist, dtype=np.float64).reshape(2, 3).tolist()
-    if any(spin):
-        after = offsets(apply_twist(pose, twist, c.action_apply_time), targets)
+    targets = _prepared(targets)
+    values, q_values, after, values_after = _lookahead(
+        _pose(pose), np.asarray(twist, dtype=np.float64), targets.positions, targets.quaternions, constants.vector)
+    return Lookahead(targets.shape, values, q_values, after, values_after)
+
+
+@kernel
+def _lookahead(pose: np.ndarray, twist: np.ndarray, positions: np.ndarray, quaternions: np.ndarray,
+               k: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    orientation = _quaternion(np.ascontiguousarray(pose[:3, :3]))
+    now = _offsets(pose[:3, 3].copy(), orientation, positions, quaternions)
+    if twist[3] != 0.0 or twist[4] != 0.0 or twist[5] != 0.0:
+        after = _pose_offsets(_apply_twist(pose, twist, k[_APPLY]), positions, quaternions)
     else:  # the orientation, so every rotation, stays as it is
-        after = _offsets([p + c.action_apply_time * v for p, v in zip(position, velocity)], targets, rotations)
-    values_after = huber_values(after, c)
-    return Lookahead(
-        shape=targets.shape,
-        values=huber_values(now, c),
-        q_values=[_step_cost(o, c) + v for o, v in zip(now, values_after)],
-        after=after,
-        values_after=values_after,
-    )
+        after = _offsets(pose[:3, 3] + k[_APPLY] * twist[:3], orientation, positions, quaternions)
+    values_after = _values(after, k)
+    q_values = np.empty(len(positions))
+    for t in range(len(positions)):
+        q_values[t] = _step_cost(now, t, k) + values_after[t]
+    return _values(now, k), q_values, after, values_after
 
 
 def target_q_value(
@@ -383,7 +414,7 @@ def target_q_value(
     action is than optimal for that target, which is what the belief update penalises.
     """
     look = lookahead(pose, twist, target, constants)
-    return _array(look.q_values, look.shape)
+    return look.q_values.reshape(look.shape)
 
 
 def goal_values(
@@ -405,8 +436,7 @@ def goal_values(
         ``goals_targets[np.arange(n_goals), best_target_index]`` to get the targets the
         per-goal actions should head for.
     """
-    values, q_values, best = lookahead(pose, twist, goals_targets, constants).per_goal()
-    return np.array(values), np.array(q_values), np.array(best, dtype=np.intp)
+    return lookahead(pose, twist, goals_targets, constants).per_goal()
 
 
 # --- belief ---------------------------------------------------------------------------------
@@ -429,22 +459,30 @@ def update_belief(
     Returns:
         The new normalised log belief (a new array).
     """
-    log_b = [float(b) - (float(q) - float(v)) for b, v, q in zip(log_belief, values, q_values)]
-    total = _log_sum_exp(log_b)
-    log_b = [b - total for b in log_b]
-    top = max(range(len(log_b)), key=log_b.__getitem__)
+    as_array = lambda v: np.asarray(v, dtype=np.float64)  # noqa: E731
+    return _update_belief(as_array(log_belief), as_array(values), as_array(q_values), float(max_prob))
+
+
+@kernel
+def _update_belief(log_belief: np.ndarray, values: np.ndarray, q_values: np.ndarray, max_prob: float) -> np.ndarray:
+    log_b = log_belief - (q_values - values)
+    log_b -= _log_sum_exp(log_b)
+    top = np.argmax(log_b)
     cap = math.log(max_prob)
     if len(log_b) > 1 and log_b[top] > cap:
         excess_each = (math.exp(log_b[top]) - max_prob) / (len(log_b) - 1)
         if excess_each > 0:  # rounding can leave nothing to spread
-            log_b = [_log_sum_exp([b, math.log(excess_each)]) for b in log_b]
+            spread = math.log(excess_each)
+            for g in range(len(log_b)):
+                log_b[g] = _log_sum_exp(np.array([log_b[g], spread]))
         log_b[top] = cap
-    return np.array(log_b)
+    return log_b
 
 
-def _log_sum_exp(values: list[float]) -> float:
-    top = max(values)
-    return top + math.log(sum(math.exp(v - top) for v in values))
+@kernel
+def _log_sum_exp(values: np.ndarray) -> float:
+    top = values.max()
+    return top + math.log(np.exp(values - top).sum())
 
 
 # --- actions and assisted twists ------------------------------------------------------------
@@ -475,38 +513,61 @@ def target_action(
         ``(..., 6)`` twists; zero components where the pose already coincides with the target.
     """
     target = _prepared(target)
-    return _array([_action(o, constants) for o in offsets(pose, target)], target.shape)
+    towards = offsets(pose, target)
+    rows = np.arange(len(towards))
+    return _actions(towards, rows, constants.vector).reshape((*target.shape, 6))
 
 
-def goal_actions(towards: list[Offset], target_values: list[float], n_targets: int,
+def goal_actions(towards: np.ndarray, target_values: np.ndarray, n_targets: int,
                  constants: HuberConstants = DEFAULT_CONSTANTS) -> np.ndarray:
     """``(n_goals, 6)``: per goal, the :func:`target_action` toward its target of lowest value.
 
     Args:
-        towards: the :class:`Offset` of every target, goal by goal (``n_targets`` each), from
+        towards: the :func:`offsets` of every target, goal by goal (``n_targets`` each), from
             the pose the actions start from.
         target_values: their :func:`huber_values`.
         n_targets: targets per goal.
     """
-    rows = range(0, len(towards), n_targets)
-    return np.array([_action(towards[r + _argmin(target_values[r:r + n_targets])], constants) for r in rows])
+    return _goal_actions(towards, np.asarray(target_values, dtype=np.float64), n_targets, constants.vector)
 
 
-def _action(towards: Offset, c: HuberConstants) -> list[float]:
-    d, angle = towards.distance, towards.angle
-    speed = _huber_slope(d, *c.translation) * min(1.0, d / c.translation_slowdown) / c.robot_translation_cost
-    linear = [speed * (v / d) for v in towards.translation] if d > 0 else [0.0, 0.0, 0.0]
-    # About the short-way axis: the quaternion's vector part, turned round where its w < 0.
-    omega = c.rotation_multiplier * _huber_slope(angle, *c.rotation) / c.robot_rotation_cost
-    omega = math.copysign(omega * min(1.0, angle / c.rotation_slowdown), towards.rotation[3])
-    sin_half = math.hypot(*towards.rotation[:3])
-    angular = [omega * (v / sin_half) for v in towards.rotation[:3]] if sin_half > 0 else [0.0, 0.0, 0.0]
-    return linear + angular
+@kernel
+def _goal_actions(towards: np.ndarray, target_values: np.ndarray, per: int, k: np.ndarray) -> np.ndarray:
+    best = np.empty(len(towards) // per, np.intp)
+    for g in range(len(best)):
+        best[g] = g * per + np.argmin(target_values[g * per:(g + 1) * per])
+    return _actions(towards, best, k)
+
+
+@kernel
+def _actions(towards: np.ndarray, rows: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """The twist toward the target of each of ``rows`` of ``towards``."""
+    out = np.zeros((len(rows), 6))
+    for i in range(len(rows)):
+        o = towards[rows[i]]
+        d, angle = o[DISTANCE], o[ANGLE]
+        speed = (_huber_slope(d, k[_A_T], k[_D_T], k[_C_T]) * min(1.0, d / k[_SLOW_T])) / k[_COST_T]
+        if d > 0:
+            for j in range(3):
+                out[i, j] = speed * (o[j] / d)
+        # About the short-way axis: the quaternion's vector part, turned round where its w < 0.
+        omega = k[_K_R] * _huber_slope(angle, k[_A_R], k[_D_R], k[_C_R]) / k[_COST_R]
+        omega = math.copysign(omega * min(1.0, angle / k[_SLOW_R]), o[6])
+        sin_half = math.sqrt(o[3] * o[3] + o[4] * o[4] + o[5] * o[5])
+        if sin_half > 0:
+            for j in range(3):
+                out[i, 3 + j] = omega * (o[3 + j] / sin_half)
+    return out
 
 
 def belief_weighted_mean(belief: np.ndarray, actions: np.ndarray) -> np.ndarray:
     """``sum_i b(i) a_i / sum b`` of ``(n_goals,)`` beliefs and ``(n_goals, 6)`` actions."""
-    return belief @ actions / belief.sum()
+    return _weighted_mean(np.asarray(belief, dtype=np.float64), np.asarray(actions, dtype=np.float64))
+
+
+@kernel
+def _weighted_mean(belief: np.ndarray, actions: np.ndarray) -> np.ndarray:
+    return belief @ np.ascontiguousarray(actions) / belief.sum()
 
 
 def assisted_twist_teleop(
@@ -519,8 +580,32 @@ def assisted_twist_teleop(
         goal_actions: ``(n_goals, 6)`` per-goal :func:`target_action` twists.
         user_twist: the direct-teleoperation twist, added unchanged so the user stays in charge.
     """
-    belief = np.asarray(belief, dtype=np.float64)
-    return belief_weighted_mean(belief, np.asarray(goal_actions)) + np.asarray(user_twist)
+    return belief_weighted_mean(belief, goal_actions) + np.asarray(user_twist)
+
+
+def teleop_step(pose: np.ndarray, user_twist: np.ndarray, targets: Targets, log_belief: np.ndarray, *,
+                max_prob: float = 0.99, constants: HuberConstants = DEFAULT_CONSTANTS) -> tuple[np.ndarray, np.ndarray]:
+    """One tick of the teleoperation robot: the new log belief and the per-goal actions.
+
+    The belief update from the user's twist (:func:`lookahead`, :meth:`Lookahead.per_goal`,
+    :func:`update_belief`) and the per-goal actions from the pose that twist leads to
+    (:func:`goal_actions`, as the reference), in one compiled call: the robot makes it every tick.
+
+    Args:
+        targets: ``(n_goals, n_targets)`` prepared :class:`Targets`.
+        log_belief: the current ``(n_goals,)`` log belief.
+    """
+    return _teleop_step(_pose(pose), np.asarray(user_twist, dtype=np.float64), targets.positions,
+                        targets.quaternions, targets.shape[-1], np.asarray(log_belief, dtype=np.float64),
+                        constants.vector, float(max_prob))
+
+
+@kernel
+def _teleop_step(pose: np.ndarray, user: np.ndarray, positions: np.ndarray, quaternions: np.ndarray, per: int,
+                 log_belief: np.ndarray, k: np.ndarray, max_prob: float) -> tuple[np.ndarray, np.ndarray]:
+    values, q_values, after, values_after = _lookahead(pose, user, positions, quaternions, k)
+    goal_values, goal_q_values, _ = _per_goal(values, q_values, per)
+    return _update_belief(log_belief, goal_values, goal_q_values, max_prob), _goal_actions(after, values_after, per, k)
 
 
 def feasible_goal_mapping(values: ArrayLike, visited: Collection[int]) -> np.ndarray:

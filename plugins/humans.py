@@ -40,9 +40,9 @@ class WaypointHuman:
         ee = np.asarray(observation["ee_position"])
         if self.path is None:
             self.path = teleop_human.waypoints(p.start, observation["goal_position"], p.waypoint_noise)
-        command = teleop_human.user_velocity(ee, self.path[self.index], gain=p.gain, max_speed=p.max_command)
-        self.index = teleop_human.next_waypoint_index(self.index, self.path, ee, command)
-        return teleop_human.user_twist(command, weight=p.joystick_weight)
+        self.index, twist = teleop_human.user_step(self.index, self.path, ee, gain=p.gain, max_speed=p.max_command,
+                                                   weight=p.joystick_weight)
+        return twist
 
 
 class MdpHuman:

@@ -46,13 +46,9 @@ class HindsightRobot:
         targets = self.targets.of(observation["goal_targets"])
         if self.log_belief is None:
             self.log_belief = hindsight.uniform_log_belief(targets.shape[0])
-        look = hindsight.lookahead(pose, user, targets)
-        values, q_values, _ = look.per_goal()
-        self.log_belief = hindsight.update_belief(self.log_belief, values, q_values,
-                                                  max_prob=self.params.max_probability)
+        self.log_belief, actions = hindsight.teleop_step(pose, user, targets, self.log_belief,
+                                                         max_prob=self.params.max_probability)
         belief = np.exp(self.log_belief)
-        # The reference's actions start from the pose the user's twist leads to.
-        actions = hindsight.goal_actions(look.after, look.values_after, targets.shape[-1])
         return RobotAction(twist=self.combine(belief, actions, user), belief=belief, goal=int(belief.argmax()))
 
     def combine(self, belief: np.ndarray, actions: np.ndarray, user: np.ndarray) -> np.ndarray:
@@ -130,7 +126,7 @@ class CollabRobot:
         return RobotAction(twist=twist, belief=belief, goal=mapping[int(belief.argmax())])
 
 
-def _hand_values(targets: hindsight.Targets, hand_pose: np.ndarray, twist: np.ndarray) -> tuple[list, list]:
+def _hand_values(targets: hindsight.Targets, hand_pose: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Goal-level V and Q of the hand's motion, for the belief update."""
     values, q_values, _ = hindsight.lookahead(hand_pose, twist, targets).per_goal()
     return values, q_values
@@ -142,8 +138,7 @@ def _plan(targets: hindsight.Targets, ee_pose: np.ndarray, visited: tuple[int, .
     per = targets.shape[-1]
     towards = hindsight.offsets(ee_pose, targets)
     values = hindsight.huber_values(towards)
-    goal_values = [min(values[i:i + per]) for i in range(0, len(values), per)]
-    mapping = hindsight.feasible_goal_mapping(goal_values, visited)
+    mapping = hindsight.feasible_goal_mapping(values.reshape(-1, per).min(axis=1), visited)
     return mapping.tolist(), hindsight.mapped_actions(hindsight.goal_actions(towards, values, per), mapping)
 
 

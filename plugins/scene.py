@@ -25,9 +25,7 @@ def at_goal(pose: np.ndarray, targets: hindsight.Targets | np.ndarray, *, distan
 
     Pass :class:`hindsight.Targets` when checking every tick.
     """
-    if min(hindsight.distances(pose, targets)) >= distance:
-        return False  # too far from every target: no need for the rotations
-    return any(o.distance < distance and o.angle < angle for o in hindsight.offsets(pose, targets))
+    return hindsight.within(pose, targets, distance=distance, angle=angle)
 
 
 def checked(value: np.ndarray, who: str, shape: tuple[int, ...]) -> np.ndarray:

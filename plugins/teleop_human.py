@@ -14,8 +14,12 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
+from hritest.compiled import kernel
+
 #: Number of waypoints from start to goal, both included (5 noisy interior points).
 N_WAYPOINTS = 7
+#: Below this command norm the user is at its waypoint and moves on to the next.
+MIN_COMMAND = 0.005
 
 
 def waypoints(start_xy: ArrayLike, goal_xy: ArrayLike, noise: ArrayLike) -> np.ndarray:
@@ -57,13 +61,17 @@ def user_velocity(
     Returns:
         ``(2,)`` command ``(vx, vy)``.
     """
-    # Plain floats: called every tick on two numbers, where numpy's overhead is most of the cost.
     (tx, ty), (cx, cy) = np.asarray(target, dtype=np.float64)[:2].tolist(), np.asarray(current)[:2].tolist()
+    return np.array(_velocity(tx, ty, cx, cy, float(gain), float(max_speed)))
+
+
+@kernel
+def _velocity(tx: float, ty: float, cx: float, cy: float, gain: float, max_speed: float) -> tuple[float, float]:
     vx, vy = gain * (tx - cx), gain * (ty - cy)
     norm = math.hypot(vx, vy)
     if norm > max_speed:
         vx, vy = vx / norm * max_speed, vy / norm * max_speed
-    return np.array([vx, vy])
+    return vx, vy
 
 
 def next_waypoint_index(
@@ -72,7 +80,7 @@ def next_waypoint_index(
     ee_xy: ArrayLike,
     velocity: ArrayLike,
     *,
-    min_command: float = 0.005,
+    min_command: float = MIN_COMMAND,
 ) -> int:
     """The waypoint to steer toward on the next tick (the reference's advance rule).
 
@@ -91,10 +99,17 @@ def next_waypoint_index(
     Returns:
         ``index + 1`` or ``index``.
     """
+    vx, vy = np.asarray(velocity, dtype=np.float64)[:2].tolist()
+    return _next_index(int(index), np.asarray(path, dtype=np.float64), float(np.asarray(ee_xy)[0]), vx, vy,
+                       float(min_command))
+
+
+@kernel
+def _next_index(index: int, path: np.ndarray, ee_x: float, vx: float, vy: float, min_command: float) -> int:
     if index >= len(path) - 1:
         return index
-    passed = path[index, 0] < np.asarray(ee_xy, dtype=np.float64)[0]
-    arrived = math.hypot(*np.asarray(velocity, dtype=np.float64)[:2].tolist()) < min_command
+    passed = path[index, 0] < ee_x
+    arrived = math.hypot(vx, vy) < min_command
     return index + 1 if passed or arrived else index
 
 
@@ -107,3 +122,23 @@ def user_twist(velocity: ArrayLike, *, weight: float = 0.2) -> np.ndarray:
     """
     vx, vy = np.asarray(velocity, dtype=np.float64)[:2]
     return np.array([weight * vx, weight * vy, 0.0, 0.0, 0.0, 0.0])
+
+
+def user_step(index: int, path: np.ndarray, ee: np.ndarray, *, gain: float, max_speed: float,
+              weight: float) -> tuple[int, np.ndarray]:
+    """One tick of the user: ``(next waypoint index, twist)``.
+
+    :func:`user_velocity` toward ``path[index]``, :func:`next_waypoint_index` and
+    :func:`user_twist` in one compiled call, made every tick of a teleoperation episode.
+    """
+    return _user_step(int(index), path, np.asarray(ee, dtype=np.float64), float(gain), float(max_speed),
+                      float(weight))
+
+
+@kernel
+def _user_step(index: int, path: np.ndarray, ee: np.ndarray, gain: float, max_speed: float,
+               weight: float) -> tuple[int, np.ndarray]:
+    vx, vy = _velocity(path[index, 0], path[index, 1], ee[0], ee[1], gain, max_speed)
+    twist = np.zeros(6)
+    twist[0], twist[1] = weight * vx, weight * vy
+    return _next_index(index, path, ee[0], vx, vy, MIN_COMMAND), twist

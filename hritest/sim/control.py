@@ -5,7 +5,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.linalg.lapack import dgesv
+
+from hritest.compiled import kernel
 
 LIMIT_RATIO = 0.6  # the reference's "joint limit reached" threshold on the translation ratio
 
@@ -54,42 +55,60 @@ def twist_to_joint_velocity(
         them too, and the resulting inf or nan made its test false whenever, say, ``vz`` was 0.
         With no translation asked for at all, it is ``False``.
     """
+    lo, hi, qdot, status = _bounds_and_solve(jacobian, twist, q, lower, upper, velocity_limits, dt, margin)
+    if status == _UNSOLVED:  # exactly singular, or not square: the minimum-norm least-squares solution
+        qdot = np.linalg.lstsq(jacobian, twist, rcond=None)[0]
+        status = _INSIDE if ((qdot >= lo) & (qdot <= hi)).all() else _OUTSIDE
+    if status == _OUTSIDE:
+        qdot = _bounded_least_squares(jacobian, twist, lo, hi)
+    return _limit_and_scale(jacobian, twist, qdot, velocity_limits, scale_at)
+
+
+# Statuses of _bounds_and_solve's unbounded solution.
+_INSIDE, _OUTSIDE, _UNSOLVED = 0, 1, 2
+
+
+@kernel
+def _bounds_and_solve(jacobian: np.ndarray, twist: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                      speeds: np.ndarray, dt: float, margin: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """The velocity bounds, and the unconstrained solution with whether it keeps to them."""
     # Speed allowed towards each limit: none within `margin` of it, and never more than the room
-    # left in one tick. Unlimited joints have infinite room. Plain floats: numpy's per-call
-    # overhead on six numbers would be most of this function's cost, every tick.
-    lo, hi = [], []
-    for angle, low, high, speed in zip(q.tolist(), lower.tolist(), upper.tolist(), velocity_limits.tolist()):
-        down, up = angle - low, high - angle
-        lo.append(-min(speed, down / dt) if down > margin else 0.0)
-        hi.append(min(speed, up / dt) if up > margin else 0.0)
+    # left in one tick. Unlimited joints have infinite room.
+    n = len(q)
+    lo, hi = np.empty(n), np.empty(n)
+    for i in range(n):
+        down, up = q[i] - lower[i], upper[i] - q[i]
+        lo[i] = -min(speeds[i], down / dt) if down > margin else 0.0
+        hi[i] = min(speeds[i], up / dt) if up > margin else 0.0
+    if jacobian.shape[0] != jacobian.shape[1]:
+        return lo, hi, np.zeros(n), _UNSOLVED
+    try:
+        qdot = np.linalg.solve(jacobian, twist)  # LAPACK's gesv, as np.linalg.solve
+    except Exception:  # noqa: BLE001 - numba raises LinAlgError for an exactly singular matrix
+        return lo, hi, np.zeros(n), _UNSOLVED
+    for i in range(n):
+        if qdot[i] < lo[i] or qdot[i] > hi[i]:
+            return lo, hi, qdot, _OUTSIDE
+    return lo, hi, qdot, _INSIDE
 
-    qdot = _least_squares(jacobian, twist)
-    if any(v < low or v > high for v, low, high in zip(qdot.tolist(), lo, hi)):
-        qdot = _bounded_least_squares(jacobian, twist, np.array(lo), np.array(hi))
 
-    # Three components: plain floats are several times faster than numpy here.
-    ratios = [
-        got / asked
-        for got, asked in zip((jacobian[:3] @ qdot).tolist(), twist[:3].tolist())
-        if abs(asked) > 1e-12
-    ]
-    limit_reached = bool(ratios) and math.hypot(*ratios) < LIMIT_RATIO
-
-    peak = max(abs(v) / speed for v, speed in zip(qdot.tolist(), velocity_limits.tolist()))
+@kernel
+def _limit_and_scale(jacobian: np.ndarray, twist: np.ndarray, qdot: np.ndarray, speeds: np.ndarray,
+                     scale_at: float) -> tuple[np.ndarray, bool]:
+    """The reference's "joint limit reached" test, then the scaling to ``scale_at`` of the limits."""
+    achieved = np.ascontiguousarray(jacobian[:3]) @ qdot
+    squares, asked_any = 0.0, False
+    for j in range(3):
+        if abs(twist[j]) > 1e-12:
+            squares += (achieved[j] / twist[j]) ** 2
+            asked_any = True
+    limit_reached = asked_any and math.sqrt(squares) < LIMIT_RATIO
+    peak = 0.0
+    for i in range(len(qdot)):
+        peak = max(peak, abs(qdot[i]) / speeds[i])
     if peak > scale_at:
         qdot = qdot * (scale_at / peak)
     return qdot, limit_reached
-
-
-def _least_squares(jacobian: np.ndarray, twist: np.ndarray) -> np.ndarray:
-    if jacobian.shape[0] == jacobian.shape[1]:
-        # LAPACK's gesv directly: the same LU solve as np.linalg.solve at a third of its
-        # per-call overhead, which dominates on a 6x6 system.
-        *_, qdot, info = dgesv(jacobian, twist)
-        if info == 0:
-            return qdot
-    # Exactly singular, or not square: the minimum-norm least-squares solution.
-    return np.linalg.lstsq(jacobian, twist, rcond=None)[0]
 
 
 def _bounded_least_squares(

@@ -20,6 +20,7 @@ from dataclasses import dataclass, replace
 import mujoco
 import numpy as np
 
+from hritest.compiled import kernel
 from hritest.errors import HritestError
 from hritest.sim.arm import ARM_MJCF
 from hritest.sim.control import twist_to_joint_velocity
@@ -152,6 +153,7 @@ class World:
         # Views into MjData (its buffers never move): cheaper than looking the rows up every tick.
         self._site_rotation = self._data.site_xmat[site].reshape(3, 3)
         self._site_position = self._data.site_xpos[site]
+        self._qpos = self._data.qpos
         self.reset()
 
     def reset(self) -> None:
@@ -256,10 +258,7 @@ class World:
             velocity_limits=self._speeds,
             dt=dt,
         )
-        achieved = self._jac @ qdot
-        # np.minimum/np.maximum: same result as np.clip, at half its cost on 6 elements.
-        np.minimum(np.maximum(self._q + qdot * dt, self._floor, out=self._q), self._ceiling, out=self._q)
-        self._data.qpos[self._qadr] = self._q
+        achieved = _integrate(self._jac, qdot, self._q, dt, self._floor, self._ceiling, self._qpos, self._qadr)
         self._forward()
         return TwistStep(qdot=qdot, achieved_twist=achieved, limit_reached=limit_reached)
 
@@ -270,15 +269,34 @@ class World:
         mujoco.mj_kinematics(m, d)
         mujoco.mj_comPos(m, d)
         mujoco.mj_jacSite(m, d, self._jac_full[:3], self._jac_full[3:], self._site)
-        self._jac_full.take(self._dofadr, axis=1, out=self._jac)
-        # Kept up to date here, so that reading it (every tick, arm moving or not) is one copy.
-        self._ee_pose[:3, :3] = self._site_rotation
-        self._ee_pose[:3, 3] = self._site_position
+        # The EE pose is kept up to date here, so that reading it (every tick) is one copy.
+        _gather(self._jac_full, self._dofadr, self._jac, self._site_rotation, self._site_position, self._ee_pose)
 
     def _hand_id(self) -> int:
         if self._hand is None:
             raise HritestError("This world has no hand: its layout's hand_start is None.")
         return self._hand
+
+
+@kernel
+def _integrate(jac: np.ndarray, qdot: np.ndarray, q: np.ndarray, dt: float, floor: np.ndarray, ceiling: np.ndarray,
+               qpos: np.ndarray, qadr: np.ndarray) -> np.ndarray:
+    """``J qdot`` (the twist achieved), then ``q <- clip(q + qdot dt, floor, ceiling)``, in ``qpos`` too."""
+    achieved = jac @ qdot
+    for i in range(len(q)):
+        q[i] = min(max(q[i] + qdot[i] * dt, floor[i]), ceiling[i])
+        qpos[qadr[i]] = q[i]
+    return achieved
+
+
+@kernel
+def _gather(jac_full: np.ndarray, dofadr: np.ndarray, jac: np.ndarray, site_rotation: np.ndarray,
+            site_position: np.ndarray, ee_pose: np.ndarray) -> None:
+    """The arm's Jacobian columns out of MuJoCo's full one, and the EE site's pose as 4x4."""
+    for i in range(len(dofadr)):
+        jac[:, i] = jac_full[:, dofadr[i]]
+    ee_pose[:3, :3] = site_rotation
+    ee_pose[:3, 3] = site_position
 
 
 def shared_world(layout: WorldLayout) -> World:

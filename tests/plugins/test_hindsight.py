@@ -280,3 +280,26 @@ def test_lookahead_agrees_with_the_per_target_functions(twist):
     best = np.reshape(look.values_after, (2, 2)).argmin(axis=1)
     expected = h.target_action(after, goals[np.arange(2), best])
     np.testing.assert_allclose(h.goal_actions(look.after, look.values_after, 2), expected, atol=1e-12)
+
+
+@pytest.mark.parametrize("twist", [[0.03, -0.01, 0.0, 0.0, 0.0, 0.0], [0.03, -0.01, 0.01, 0.2, -0.1, 0.3]])
+def test_teleop_step_is_belief_update_and_actions_after_the_twist(twist):
+    goals = np.stack([*two_goals(), h.target_poses([0.5, -0.1, Z])])
+    targets = h.prepare_targets(goals)
+    pose = h.apply_twist(pose_at([0.45, 0.02, Z]), [0, 0, 0, 0.1, 0.2, 0.3], 1.0)
+    log_b = np.log([0.5, 0.3, 0.2])
+    look = h.lookahead(pose, twist, targets)
+    values, q_values, _ = look.per_goal()
+    new_log_b, actions = h.teleop_step(pose, np.asarray(twist), targets, log_b)
+    np.testing.assert_array_equal(new_log_b, h.update_belief(log_b, values, q_values))
+    np.testing.assert_array_equal(actions, h.goal_actions(look.after, look.values_after, 2))
+
+
+def test_within_needs_both_distance_and_angle():
+    targets = h.prepare_targets(h.target_poses([0.6, 0.0, Z]))
+    near = pose_at([0.6, 0.005, Z])
+    assert h.within(near, targets, distance=0.01, angle=0.1)
+    assert not h.within(near, targets, distance=0.004, angle=0.1)
+    tilted = h.apply_twist(near, [0, 0, 0, 0.3, 0, 0], 1.0)  # 0.3 rad from both targets
+    assert not h.within(tilted, targets, distance=0.01, angle=0.1)
+    assert h.within(tilted, targets, distance=0.01, angle=0.31)

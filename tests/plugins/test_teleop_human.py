@@ -80,3 +80,15 @@ def test_simulated_user_alone_reaches_the_goal_through_the_waypoints():
     assert index == 6
     assert np.linalg.norm(pose[:2, 3] - GOAL) < 0.01
     assert max_dev < 0.03  # it follows the noisy path, not the straight line
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.integers(0, 6), st.floats(0.3, 0.7), st.floats(-0.1, 0.2))
+def test_user_step_is_velocity_advance_and_twist_in_one_call(index, x, y):
+    path = th.waypoints(START, GOAL, NOISE)
+    ee = np.array([x, y, 0.96])
+    command = th.user_velocity(ee, path[index])
+    expected = th.next_waypoint_index(index, path, ee, command), th.user_twist(command)
+    got = th.user_step(index, path, ee, gain=10.0, max_speed=0.25, weight=0.2)
+    assert got[0] == expected[0]
+    np.testing.assert_array_equal(got[1], expected[1])
