@@ -252,11 +252,6 @@ def _offsets(position: np.ndarray, orientation: np.ndarray, positions: np.ndarra
     return out
 
 
-def distances(pose: np.ndarray, targets: Targets | ArrayLike) -> np.ndarray:
-    """The :func:`offsets` distances alone (flat, the same numbers)."""
-    return offsets(pose, targets)[:, DISTANCE]
-
-
 def within(pose: np.ndarray, targets: Targets | ArrayLike, *, distance: float, angle: float) -> bool:
     """Whether ``pose`` is closer than ``distance`` (m) and ``angle`` (rad) to any of ``targets``."""
     targets = _prepared(targets)
