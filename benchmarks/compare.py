@@ -7,13 +7,16 @@ Prints a Markdown table (final QD-score raw and normalised, mean +- standard err
 coverage, best objective, search wall time, evaluations per second, and each algorithm's QD-score
 over Random's), and writes it with every run and a comparison report (curves and heatmaps side by
 side, one run per algorithm: its first seed) into ``--out``. Runs go seed by seed; the same
-command with the same ``--out`` reuses the runs that finished, so a stopped comparison continues.
+command with the same ``--out`` reuses the runs that finished and resumes a stopped one from its
+last checkpoint (when its settings and spec are the same), so a stopped comparison continues:
+this is how a run longer than one sitting (the paper's protocol on a CPU) gets done.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import json
 import math
 import shutil
 import statistics
@@ -22,6 +25,9 @@ from pathlib import Path
 
 from hritest import search as qd
 from hritest.report import compare_runs
+from hritest.rundir import digest
+from hritest.search.loop import SURROGATE
+from hritest.spec import load_spec
 
 
 def final_row(run: Path) -> dict[str, float]:
@@ -36,6 +42,18 @@ def finished(run: Path, evaluations: int) -> bool:
         return final_row(run)["evaluations"] == evaluations
     except (OSError, KeyError, IndexError, ValueError):
         return False
+
+
+def resumable(run: Path, *, algorithm: str, evals: int, seed: int, inner_iterations: int, spec: Path) -> bool:
+    """Whether ``run`` is a stopped run of these settings and of this spec, to continue from its checkpoint."""
+    try:
+        meta = json.loads((run / "run.json").read_text())
+    except (OSError, ValueError):
+        return False
+    wanted = {"algorithm": algorithm, "budget": evals, "seed": seed, "spec_digest": digest(spec)}
+    if algorithm in SURROGATE:
+        wanted["inner_iterations"] = inner_iterations
+    return (run / "checkpoint.pkl").is_file() and all(meta.get(k) == v for k, v in wanted.items())
 
 
 def mean_sem(values: list[float]) -> str:
@@ -56,6 +74,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args()
     algorithms = [a.strip() for a in args.algorithms.split(",") if a.strip()]
+    inner_iterations = args.inner_iterations or load_spec(args.spec).search.surrogate.inner_iterations
     out = args.out or Path("benchmark-runs") / f"{args.spec.stem}-{time.strftime('%Y%m%d-%H%M%S')}"
 
     results: dict[str, list[dict[str, float]]] = {a: [] for a in algorithms}
@@ -64,8 +83,12 @@ def main() -> None:
             run = out / f"{algorithm}-s{seed}"
             if finished(run, args.evals):
                 print(f"{algorithm} seed {seed}: finished earlier in {run}, reused", flush=True)
+            elif resumable(run, algorithm=algorithm, evals=args.evals, seed=seed, inner_iterations=inner_iterations,
+                           spec=args.spec):
+                print(f"{algorithm} seed {seed}: stopped earlier in {run}, resumed", flush=True)
+                qd.resume(run_path=run, backend=qd.Backend(workers=args.workers))
             else:
-                if run.exists():  # a stopped run: start it again from scratch
+                if run.exists():  # a run of other settings, or one that never checkpointed
                     shutil.rmtree(run)
                 qd.start(spec_file=args.spec, out=run, algorithm=algorithm, budget=args.evals, seed=seed,
                          backend=qd.Backend(workers=args.workers),
@@ -79,7 +102,7 @@ def main() -> None:
     random_qd = statistics.fmean(r["qd_score"] for r in results["random"]) if "random" in results else None
     lines = [
         f"{args.spec.name}: {args.evals} evaluations, {args.seeds} seeds, inner iterations "
-        f"{args.inner_iterations or 'spec default'}, {args.workers} workers",
+        f"{inner_iterations:,} (SAS, DSAS), {args.workers} workers",
         "",
         "| algorithm | QD-score | normalised QD-score | coverage | best | wall s | evaluations / s | QD-score / Random |",
         "|---|---|---|---|---|---|---|---|",

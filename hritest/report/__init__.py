@@ -295,7 +295,8 @@ def _glance(data: RunData) -> list:
     rows = [
         ("spec", f"{spec.name} ({meta.get('spec_file', 'spec.yaml')})"),
         ("spec digest", str(meta.get("spec_digest", ""))[:16]),
-        ("algorithm", f"{meta.get('algorithm', '?')}, seed {meta.get('seed', '?')}"),
+        ("algorithm", f"{meta.get('algorithm', '?')}, seed {meta.get('seed', '?')}"
+                      + (f", {meta['inner_iterations']:,} inner iterations" if "inner_iterations" in meta else "")),
         ("evaluations", f"{len(data.records)} of a budget of {meta.get('budget', '?')}"),
         ("statuses", ", ".join(f"{n} {s}" for s, n in sorted(statuses.items()))),
         ("wall time", f"{last['wall_time']:.1f} s" if "wall_time" in last else "not recorded"),

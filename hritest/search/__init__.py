@@ -15,7 +15,7 @@ from hritest.domain import Domain, compile_spec
 from hritest.errors import HritestError
 from hritest.rundir import RunDirectory, RunDirectoryError, digest
 from hritest.search.executor import DomainRef, Evaluator, local_pool
-from hritest.search.loop import ALGORITHMS, Search, Snapshot
+from hritest.search.loop import ALGORITHMS, SURROGATE, Search, Snapshot
 from hritest.search.proposers import SurrogateOptions
 from hritest.spec import load_spec
 
@@ -68,11 +68,12 @@ def start(*, spec_file: Path, out: Path | None, root: Path = Path("runs"), algor
     budget = budget if budget is not None else settings.budget
     seed = seed if seed is not None else settings.seed
     ref = DomainRef(spec=str(Path(spec_file).resolve()), base=str(Path(spec_file).resolve().parent))
+    meta = {"algorithm": algorithm, "budget": budget, "seed": seed, "spec_base": ref.base}
+    if algorithm in SURROGATE:  # what decides an SAS / DSAS run's cost and quality besides the budget
+        meta["inner_iterations"] = surrogate.inner_iterations or settings.surrogate.inner_iterations
     evaluator = backend.evaluator(ref)  # before the folder exists: a bad backend leaves nothing behind
     try:
-        run = RunDirectory.create(root=root, spec_file=spec_file, name=spec.name, folder=out,
-                                  meta={"algorithm": algorithm, "budget": budget, "seed": seed,
-                                        "spec_base": ref.base})
+        run = RunDirectory.create(root=root, spec_file=spec_file, name=spec.name, folder=out, meta=meta)
         search = Search.new(domain=domain, run=run, algorithm=algorithm, budget=budget, seed=seed,
                             options=surrogate)
         search.run(evaluator, progress)

@@ -146,6 +146,7 @@ def test_run_json_records_what_is_needed_to_reproduce(toy_spec, tmp_path):
     qd.start(spec_file=toy_spec(), out=tmp_path / "run", budget=10, seed=2, algorithm="random", backend=TWO)
     meta = json.loads((tmp_path / "run" / "run.json").read_text())
     assert meta["seed"] == 2 and meta["algorithm"] == "random" and meta["budget"] == 10
+    assert "inner_iterations" not in meta  # only surrogate runs have an inner loop
     assert {"hritest", "mujoco", "ribs", "numpy"} <= set(meta["versions"])
 
 

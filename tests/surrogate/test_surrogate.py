@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -131,6 +132,7 @@ def test_a_tiny_run_completes_and_resumes(tmp_path, algorithm):
     accuracy = found.state["proposer"].accuracy(found.domain)
     assert accuracy["held_out"] > 0 and np.isfinite(accuracy["objective_mae"])
     assert (tmp_path / "run" / "surrogate.json").is_file()
+    assert json.loads((tmp_path / "run" / "run.json").read_text())["inner_iterations"] == 20  # the spec's
 
     # Resume after the run "was killed" right after asking a batch: rewind to an earlier checkpoint.
     run = RunDirectory.open(tmp_path / "run")
