@@ -13,6 +13,9 @@ Layout of ``runs/<spec>-<timestamp>/``::
 
 Whole files are replaced atomically (write a temporary file, then rename); the two append-only
 files may end in a torn record after a kill, which :meth:`RunDirectory.evaluations` drops.
+
+:meth:`RunDirectory.pack` and :func:`unpack` carry a run to another machine as one compressed
+file, for a search that outlives the machine it started on (a long benchmark in a sandbox).
 """
 
 from __future__ import annotations
@@ -21,10 +24,12 @@ import csv
 import hashlib
 import io
 import json
+import lzma
 import os
 import pickle
 import platform
 import shutil
+import tarfile
 import tempfile
 from datetime import datetime, timezone
 from pathlib import Path
@@ -36,6 +41,9 @@ from hritest.errors import HritestError
 
 RUN_FILE = "run.json"
 FORMAT = 1
+# The order pack() reads a live run in: the checkpoint before the evaluations it counts, each
+# evaluation's line before its occupancy record (the reverse of the order they are written in).
+PACK_FIRST = ("checkpoint.pkl", "evaluations.jsonl", "occupancy.f32")
 
 
 class RunDirectoryError(HritestError):
@@ -124,6 +132,23 @@ class RunDirectory:
             raise RunDirectoryError(f"{path} has no spec.yaml; the run cannot be resumed or reported")
         return cls(path, meta)
 
+    def pack(self) -> bytes:
+        """The whole folder as an xz-compressed tar, safe to take while the search runs.
+
+        Whatever the search writes meanwhile, the result is a state a kill could have left, which
+        resuming handles: the checkpoint is read first, and every evaluation it counts was
+        appended before it was written; an evaluation's line is read before the occupancy file,
+        which gets each record before its line. Atomic replacements are read whole, old or new.
+        """
+        names = [*PACK_FIRST, *sorted(p.name for p in self.path.iterdir() if p.name not in PACK_FIRST)]
+        buffer = io.BytesIO()
+        with tarfile.open(fileobj=buffer, mode="w:xz", preset=9) as tar:
+            for name in names:
+                path = self.path / name
+                if path.is_file() and not name.startswith("."):  # not atomic_write's temporary files
+                    tar.add(path, arcname=f"{self.path.name}/{name}")
+        return buffer.getvalue()
+
     # --- evaluations -------------------------------------------------------------------------
 
     def append(self, record: dict[str, Any], occupancy: np.ndarray | None, shape: tuple[int, ...]) -> None:
@@ -190,3 +215,34 @@ class RunDirectory:
 
     def write_text(self, name: str, text: str) -> None:
         atomic_write(self.path / name, text)
+
+
+def unpack(archive: Path, into: Path) -> RunDirectory:
+    """Unpacks a :meth:`RunDirectory.pack` file as a new folder under ``into``; resume it from there.
+
+    Raises:
+        RunDirectoryError: not such a file, or its run folder exists already under ``into``.
+    """
+    archive, into = Path(archive), Path(into)
+    try:
+        with tarfile.open(archive, mode="r:*") as tar:
+            members = tar.getmembers()
+            tops = {Path(m.name).parts[0] for m in members}
+            if len(tops) != 1 or f"{next(iter(tops))}/{RUN_FILE}" not in {m.name for m in members}:
+                raise RunDirectoryError(f"{archive} holds no single run folder; give a file that "
+                                        "RunDirectory.pack (benchmarks/stash.py save) wrote")
+            target = into / tops.pop()
+            if target.exists():
+                raise RunDirectoryError(f"{target} exists already; resume it there, or move it away to unpack "
+                                        f"{archive} in its place")
+            into.mkdir(parents=True, exist_ok=True)
+            staging = Path(tempfile.mkdtemp(dir=into, prefix=".unpack-"))
+            try:  # into a hidden folder first, so a failure leaves no half-unpacked run behind
+                tar.extractall(staging, filter="data")
+                os.replace(staging / target.name, target)
+            finally:
+                shutil.rmtree(staging, ignore_errors=True)
+    except (OSError, tarfile.TarError, lzma.LZMAError, EOFError) as exc:
+        raise RunDirectoryError(f"{archive} cannot be unpacked ({exc}); give a file that "
+                                "RunDirectory.pack (benchmarks/stash.py save) wrote") from None
+    return RunDirectory.open(target)

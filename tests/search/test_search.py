@@ -17,7 +17,7 @@ from typer.testing import CliRunner
 
 from hritest import search as qd
 from hritest.cli import app
-from hritest.rundir import RunDirectory
+from hritest.rundir import RunDirectory, RunDirectoryError, unpack
 
 runner = CliRunner()
 TWO = qd.Backend(workers=2, timeout=20)
@@ -78,36 +78,73 @@ def test_a_misbehaving_plugin_fails_its_scenarios_only(toy_spec, tmp_path, fault
     assert elites_.isdisjoint(r["index"] for r in bad)
 
 
+def start_in_background(spec: Path, out: Path, *, until_lines: int) -> subprocess.Popen:
+    """A 700-evaluation search in its own process, returned once ``until_lines`` evaluations are in."""
+    command = [sys.executable, "-m", "hritest.cli", "search", str(spec), "--budget", "700", "--seed", "5",
+               "--workers", "2", "--quiet", "--out", str(out)]
+    process = subprocess.Popen(command, start_new_session=True, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL)
+    lines = out / "evaluations.jsonl"
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        if lines.exists() and len(lines.read_text().splitlines()) > until_lines:
+            break
+        time.sleep(0.05)
+    return process
+
+
+def kill(process: subprocess.Popen) -> None:
+    os.killpg(process.pid, signal.SIGKILL)
+    process.wait()
+
+
+def resume_to_the_end(run: Path) -> list[dict]:
+    result = runner.invoke(app, ["search", "--resume", str(run), "--workers", "2", "--quiet"])
+    assert result.exit_code in (0, 1) and isinstance(result.exception, SystemExit | None), result.output
+    after = RunDirectory.open(run).evaluations()
+    assert sorted(r["index"] for r in after) == list(range(700))
+    progress = np.loadtxt(run / "progress.csv", delimiter=",", skiprows=1, usecols=0)
+    assert progress[-1] == 700
+    return after
+
+
 def test_a_killed_run_resumes_to_the_same_state(toy_spec, tmp_path):
     spec = toy_spec("time_limit: 10.0\n", "time_limit: 10.0\n  params: {delay: 0.01}\n")
     qd.start(spec_file=spec, out=tmp_path / "whole", budget=700, seed=5, backend=TWO)
 
     killed = tmp_path / "killed"
-    command = [sys.executable, "-m", "hritest.cli", "search", str(spec), "--budget", "700", "--seed", "5",
-               "--workers", "2", "--quiet", "--out", str(killed)]
-    process = subprocess.Popen(command, start_new_session=True, stdout=subprocess.DEVNULL,
-                               stderr=subprocess.DEVNULL)
-    lines = killed / "evaluations.jsonl"
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline:  # kill it in the middle of its second batch
-        if lines.exists() and len(lines.read_text().splitlines()) > 350:
-            break
-        time.sleep(0.05)
-    os.killpg(process.pid, signal.SIGKILL)
-    process.wait()
+    kill(start_in_background(spec, killed, until_lines=350))  # in the middle of its second batch
     before = RunDirectory.open(killed).evaluations()
     assert 350 < len(before) < 700
 
-    result = runner.invoke(app, ["search", "--resume", str(killed), "--workers", "2", "--quiet"])
-    assert result.exit_code in (0, 1) and isinstance(result.exception, SystemExit | None), result.output
-    after = RunDirectory.open(killed).evaluations()
-    assert sorted(r["index"] for r in after) == list(range(700))
+    after = resume_to_the_end(killed)
     done_before = {r["index"]: r for r in before}
     redone = [r for r in after if r["index"] in done_before and r != done_before[r["index"]]]
     assert not redone  # nothing finished before the kill was evaluated again
     assert elites(killed) == elites(tmp_path / "whole")
-    progress = np.loadtxt(killed / "progress.csv", delimiter=",", skiprows=1, usecols=0)
-    assert progress[-1] == 700
+
+
+def test_a_run_packed_while_it_runs_resumes_elsewhere_to_the_same_state(toy_spec, tmp_path):
+    spec = toy_spec("time_limit: 10.0\n", "time_limit: 10.0\n  params: {delay: 0.01}\n")
+    qd.start(spec_file=spec, out=tmp_path / "whole", budget=700, seed=5, backend=TWO)
+
+    process = start_in_background(spec, tmp_path / "here" / "run", until_lines=350)
+    packed = RunDirectory.open(tmp_path / "here" / "run").pack()  # while it writes
+    kill(process)
+    archive = tmp_path / "run.tar.xz"
+    archive.write_bytes(packed)
+    run = unpack(archive, tmp_path / "there")
+    assert run.path == tmp_path / "there" / "run"
+    assert 350 < len(run.evaluations()) < 700
+    resume_to_the_end(run.path)
+    assert elites(run.path) == elites(tmp_path / "whole")
+
+    with pytest.raises(RunDirectoryError, match="exists already"):  # never over a run
+        unpack(archive, tmp_path / "there")
+    archive.write_bytes(packed[: len(packed) // 2])
+    with pytest.raises(RunDirectoryError, match="cannot be unpacked"):
+        unpack(archive, tmp_path / "elsewhere")
+    assert not (tmp_path / "elsewhere" / "run").exists()  # nothing half-unpacked
 
 
 def test_resume_refuses_bad_run_directories(toy_spec, tmp_path):
