@@ -191,12 +191,15 @@ class Search:
     def dataset(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Training data from every successful evaluation: raw theta, occupancy grids, targets.
 
-        Targets are the regularised objective over the objective's range, then the measures.
+        Targets are the regularised objective over the objective's range, then the measures. Rows
+        are in evaluation order, not in the order the workers finished them (the files' order),
+        so that training, and so the run, is the same whatever the number of workers.
         """
         lo, hi = self.domain.spec.objective.range
         order = [r["index"] for r in self.run_dir.evaluations()]
         grids = self.run_dir.occupancy(self.occupancy_shape)[: len(order)]
-        rows = [(i, self.records[index]) for i, index in enumerate(order) if self.records[index]["status"] == "ok"]
+        rows = sorted(((i, self.records[index]) for i, index in enumerate(order)
+                       if self.records[index]["status"] == "ok"), key=lambda row: row[1]["index"])
         theta = np.array([r["theta"] for _, r in rows], dtype=np.float32).reshape(len(rows), -1)
         targets = np.array([[r["search_objective"] / (hi - lo), *r["measures"]] for _, r in rows],
                            dtype=np.float32).reshape(len(rows), -1)
