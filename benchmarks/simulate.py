@@ -38,7 +38,6 @@ from hritest.domain import Domain, compile_spec  # noqa: E402
 from hritest.evaluate import evaluate, evaluate_with_rollout  # noqa: E402
 from hritest.sim import World  # noqa: E402
 from hritest.spec import load_spec  # noqa: E402
-from hritest.sim import world_layout  # noqa: E402
 
 SPECS = Path(__file__).resolve().parent.parent / "specs"
 DEFAULT_N = {"teleop": 1000, "collab": 200}
@@ -113,7 +112,7 @@ def world_construction_ms(domain: Domain, repeats: int = 20) -> float:
     """Milliseconds per ``World(layout=...)`` for the first scenario's scene (what every scenario
     would pay without :func:`hritest.sim.world.shared_world`)."""
     scenario = domain.space.bind(domain.repair(thetas(domain, 1, 0)[0]).theta)
-    layout = world_layout(domain.spec, scenario, hand_start=None)
+    layout = domain.context(scenario).world
     start = time.perf_counter()
     for _ in range(repeats):
         World(layout=layout)

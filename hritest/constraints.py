@@ -95,13 +95,15 @@ class ScenarioRepair:
             repair.check_feasible(self._problem)
 
     def __call__(self, theta: np.ndarray) -> RepairOutcome:
+        """The repaired theta. It always lies within the parameters' bounds: without a ``bounds``
+        constraint it is clipped into them at no cost, so no plugin ever sees a value outside them."""
         theta = np.asarray(theta, dtype=float).copy()
         cost = 0.0
         if self._clip_groups is not None:
             theta, clip_cost = repair.clip_repair(theta, self._lower, self._upper, self._clip_groups)
             cost += float(clip_cost)
         if self._problem is None:
-            return RepairOutcome(theta=theta, cost=cost, regions={})
+            return RepairOutcome(theta=self._within_bounds(theta), cost=cost, regions={})
         xy = self._nominal.copy()
         bound = self._columns >= 0
         xy[bound] = theta[self._columns[bound]]
@@ -114,7 +116,13 @@ class ScenarioRepair:
             return RepairOutcome(theta=theta, cost=cost, regions=regions, status=f"repair_{result.status}",
                                  message=result.message)
         theta[self._columns[bound]] = result.xy[bound]
-        return RepairOutcome(theta=theta, cost=cost + result.cost, regions=regions, status=result.status)
+        return RepairOutcome(theta=self._within_bounds(theta), cost=cost + result.cost, regions=regions,
+                             status=result.status)
+
+    def _within_bounds(self, theta: np.ndarray) -> np.ndarray:
+        # After the placement program (whose own bounds keep what it moves inside), so the
+        # paper's repairs are untouched; what is left outside is clipped at no cost.
+        return np.clip(theta, self._lower, self._upper)
 
 
 def _clip_groups(spec: Spec, space: ScenarioSpace) -> list[list[int]] | None:
@@ -142,7 +150,7 @@ def _program(spec: Spec, space: ScenarioSpace):  # noqa: ANN202 - (problem, colu
     names = list(dict.fromkeys(name for c in placement for name in c.objects))
     index = {name: i for i, name in enumerate(names)}
     objects = {o.name: o for o in spec.objects}
-    regions = [repair.Region(name=r.name, x=r.x, y=r.y) for r in spec.workspace.regions]
+    regions = [repair.Region(name=r.name, x=r.x, y=r.y) for r in spec.workspace.regions] if spec.workspace else []
     region_index = {r.name: i for i, r in enumerate(regions)}
 
     allowed: list[set[int]] = [set() for _ in names]
@@ -164,7 +172,7 @@ def _program(spec: Spec, space: ScenarioSpace):  # noqa: ANN202 - (problem, colu
     bounds = np.empty((len(names), 2, 2))
     nominal = np.array([objects[name].position[:2] for name in names], dtype=float)
     for slot in space.slots:
-        if slot.target in index:
+        if slot.target in index and slot.attribute in ("x", "y"):  # the program places in x, y only
             i, axis = index[slot.target], "xy".index(slot.attribute)
             columns[i, axis] = slot.start
     for i in range(len(names)):

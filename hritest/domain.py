@@ -7,21 +7,28 @@ it resolves plugins, checks their parameters, and fixes the order of theta's com
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pydantic
 
-from hritest import plugins
+from hritest import contract, plugins
 from hritest.constraints import ScenarioRepair
-from hritest.scenario import ScenarioSpace, Slot
-from hritest.errors import PluginError, SpecError
-from hritest.spec import Spec, source_of
-from hritest.spec import expr
+from hritest.errors import HritestError, PluginError, SpecError
+from hritest.protocols import TaskContext
 from hritest.repair import InfeasibleConstraints
-from hritest.spec.references import check_references
+from hritest.scenario import Scenario, ScenarioSpace, Slot
+from hritest.sim.layout import START_CONFIG, ArmMount, BodyPose, Box, WorldLayout
+from hritest.spec import Spec, expr, source_of
+from hritest.spec.references import ARM_TARGET, check_references
+
+if TYPE_CHECKING:
+    from hritest.evaluate import Evaluation
+
+REGION_COLOUR = (0.55, 0.75, 0.95, 0.6)
+OBJECT_COLOUR = (0.9, 0.5, 0.1, 1.0)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -34,7 +41,12 @@ class Measure:
 
 @dataclass(frozen=True, kw_only=True)
 class Domain:
-    """Everything a search needs from a spec, resolved and checked."""
+    """Everything a search needs from a spec, resolved and checked.
+
+    ``world`` is the MuJoCo world of the spec's ``world``/``workspace`` sections at the nominal
+    placement (``None`` without either); :meth:`context` places it for one scenario. ``nominal``
+    is theta of the nominal scenario.
+    """
 
     spec: Spec
     space: ScenarioSpace
@@ -45,12 +57,31 @@ class Domain:
     measures: tuple[Measure, ...]
     failure: expr.Expression
     repair: ScenarioRepair = field(repr=False)
+    nominal: np.ndarray = field(repr=False)
+    world: WorldLayout | None = None
+    folder: Path | None = None
 
-    def evaluate(self, theta: np.ndarray, *, seed: int = 0) -> Any:
-        """Repair -> simulate -> metrics for one theta: an :class:`hritest.evaluate.Evaluation`."""
+    def evaluate(self, theta: np.ndarray, *, seed: int = 0) -> Evaluation:
+        """Repair -> simulate -> metrics for one theta."""
         from hritest.evaluate import evaluate
 
         return evaluate(self, theta, seed=seed)
+
+    def context(self, scenario: Scenario) -> TaskContext:
+        """What the task gets for ``scenario``: never the spec."""
+        return TaskContext(
+            dt=self.spec.task.dt,
+            time_limit=self.spec.task.time_limit,
+            params=plugin_params(self.task_cls, scenario.task),
+            scenario=scenario,
+            world=None if self.world is None else place(self.world, scenario),
+            folder=self.folder,
+        )
+
+    @property
+    def grids(self) -> Mapping[str, tuple[int, int]]:
+        """The occupancy grids the task declares, name -> shape, in its order."""
+        return dict(getattr(self.task_cls, "grids", {}))
 
     @property
     def archive_dims(self) -> tuple[int, ...]:
@@ -61,15 +92,43 @@ class Domain:
         return tuple(m.range for m in self.measures)
 
 
+def plugin_params(cls: type, values: Mapping[str, Any]) -> Any:
+    """A plugin's params as it receives them: its ``Params`` model, or the dict if it has none."""
+    model = getattr(cls, "Params", None)
+    return model.model_validate(dict(values)) if model is not None else dict(values)
+
+
+def place(layout: WorldLayout, scenario: Scenario) -> WorldLayout:
+    """``layout`` with the objects, the arm and the world model's bodies where ``scenario`` puts them."""
+    objects = tuple(replace(box, center=tuple(float(v) for v in scenario.objects[box.name]))
+                    for box in layout.objects)
+    bodies, arm = dict(layout.bodies), layout.arm
+    for name, values in scenario.bodies.items():
+        if name == ARM_TARGET:
+            base = list(arm.base)
+            for axis, attribute in enumerate("xyz"):
+                if attribute in values:
+                    base[axis] = float(values[attribute])
+            start = values.get("start", arm.start)
+            arm = replace(arm, base=tuple(base), yaw=float(values.get("yaw", arm.yaw)),
+                          start=None if start is None else tuple(float(v) for v in np.ravel(start)))
+        else:
+            pose = bodies.get(name, BodyPose())
+            bodies[name] = replace(pose, **{k: float(v) for k, v in values.items()})
+    return replace(layout, objects=objects, bodies=bodies, arm=arm)
+
+
 def compile_spec(spec: Spec, *, base: Path | None = None) -> Domain:
     """Resolves plugins and builds the :class:`Domain`.
 
     Args:
-        base: the folder that ``file.py:Class`` plugin paths are relative to (the spec's folder).
+        base: the folder that ``file.py:Class`` plugin paths and model files are relative to
+            (default: the spec's folder).
 
     Raises:
-        SpecError: a plugin that cannot be loaded, parameters it does not accept, or an
-            expression name that neither the task's metrics nor the parameters define.
+        SpecError: a plugin that cannot be loaded or breaks the plugin contract, parameters it
+            does not accept (bounds included), an expression name that neither the task's
+            metrics nor the parameters define, or a world model that does not build.
     """
     source = source_of(spec)
     base = base if base is not None else (Path(source.file).parent if source.file != "<spec>" else None)
@@ -82,6 +141,9 @@ def compile_spec(spec: Spec, *, base: Path | None = None) -> Domain:
             classes[kind] = plugins.resolve(ref, kind=kind, base=base)
         except PluginError as exc:
             issues.append(source.issue(path, str(exc)))
+        else:
+            issues += [source.issue(path, f"{kind} plugin {ref!r}: {problem}")
+                       for problem in contract.class_problems(classes[kind], kind=kind)]
     if issues:
         raise SpecError(issues, file=source.file)
 
@@ -99,6 +161,10 @@ def compile_spec(spec: Spec, *, base: Path | None = None) -> Domain:
         nominal_objects={o.name: np.array(o.position, dtype=float) for o in spec.objects},
         nominal_params=nominal,
     )
+    world = _world(spec, base)
+    theta0 = _nominal_theta(spec, space, world)
+    if world is not None:
+        _check_world(spec, world, space.bind(theta0), source)
     repair = ScenarioRepair(spec=spec, space=space)
     try:
         repair.check_feasible()
@@ -117,6 +183,9 @@ def compile_spec(spec: Spec, *, base: Path | None = None) -> Domain:
             for m in spec.measures
         ),
         failure=expr.parse(spec.failure, condition=True),
+        nominal=theta0,
+        world=world,
+        folder=base,
     )
 
 
@@ -129,10 +198,12 @@ def _slots(spec: Spec) -> tuple[Slot, ...]:
 
 
 def _plugin_params(cls: type, given: Mapping[str, Any], path: tuple, spec: Spec, source) -> dict[str, Any]:
-    """Validates a plugin's ``params`` (and theta-bound names) against its ``Params`` model.
+    """Validates a plugin's ``params`` (and theta-bound names and bounds) against its ``Params`` model.
 
     A plugin without a ``Params`` model takes its params as given. Theta-bound names must be
-    fields of the model, so a typo in ``bind: human.rationalty`` is caught here.
+    fields of the model, so a typo in ``bind: human.rationalty`` is caught here, and both ends of
+    a bound parameter's bounds must be values the model accepts, so that no scenario the search
+    proposes can fail its validation.
     """
     model = getattr(cls, "Params", None)
     agent = path[0]
@@ -151,7 +222,97 @@ def _plugin_params(cls: type, given: Mapping[str, Any], path: tuple, spec: Spec,
         for error in exc.errors(include_url=False):
             issues.append(source.issue(path + tuple(error["loc"]), error["msg"]))
         params = {}
+    if not issues:
+        for i, p in bound:
+            attribute = p.bind.split(".")[1]
+            for end in p.bounds:
+                value = end if p.size == 1 else np.full(p.size, end)
+                try:
+                    model.model_validate({**params, attribute: value})
+                except pydantic.ValidationError as exc:
+                    reason = "; ".join(e["msg"] for e in exc.errors(include_url=False))
+                    issues.append(source.issue(("parameters", i, "bounds"), (
+                        f"{cls.__name__}.Params rejects {attribute} = {end} ({reason}); narrow the bounds "
+                        "to values it accepts")))
+                    break
     if issues:
         raise SpecError(issues, file=source.file)
     return params
 
+
+def _world(spec: Spec, base: Path | None) -> WorldLayout | None:
+    """The spec's MuJoCo world at its nominal placement: its model, workspace boxes and arm."""
+    if spec.world is None and spec.workspace is None:
+        return None
+
+    def resolved(path: str | None) -> str | None:
+        return None if path is None else str(Path(path) if base is None else base / path)
+
+    table, regions = None, ()
+    if spec.workspace is not None:
+        top = 0.0
+        if spec.workspace.table is not None:
+            t = spec.workspace.table
+            table = Box(name="table", center=t.center, half_size=t.half_size)
+            top = t.center[2] + t.half_size[2]
+        regions = tuple(
+            Box(name=r.name, center=((r.x[0] + r.x[1]) / 2, (r.y[0] + r.y[1]) / 2, top + 0.001),
+                half_size=((r.x[1] - r.x[0]) / 2, (r.y[1] - r.y[0]) / 2, 0.001), rgba=REGION_COLOUR)
+            for r in spec.workspace.regions
+        )
+    objects = tuple(Box(name=o.name, center=o.position, half_size=o.half_size, rgba=OBJECT_COLOUR)
+                    for o in spec.objects)
+    if spec.world is None:  # a tabletop spec of the paper's kind: the built-in arm
+        return WorldLayout(table=table, regions=regions, objects=objects, arm=ArmMount())
+    arm = spec.world.arm
+    mount = None if arm is None else ArmMount(
+        mjcf=resolved(arm.model), ee_site=arm.ee_site, base=arm.base, yaw=arm.yaw,
+        start=None if arm.start is None else tuple(arm.start))
+    return WorldLayout(model=resolved(spec.world.model), table=table, regions=regions, objects=objects, arm=mount)
+
+
+def _nominal_theta(spec: Spec, space: ScenarioSpace, world: WorldLayout | None) -> np.ndarray:
+    """Theta of the nominal scenario: each parameter's ``nominal``, else the spec's own value of what
+    it binds (an object's position, the arm's pose, a plugin's param), else the middle of its bounds."""
+    theta = np.empty(space.dim)
+    for slot, p in zip(space.slots, spec.parameters):
+        value = p.nominal if p.nominal is not None else _spec_value(slot, space, world)
+        if value is None or np.size(value) not in (1, slot.size):
+            value = (slot.lower + slot.upper) / 2
+        theta[slot.start:slot.start + slot.size] = np.clip(value, slot.lower, slot.upper)
+    return theta
+
+
+def _spec_value(slot: Slot, space: ScenarioSpace, world: WorldLayout | None) -> Any:
+    if slot.target in space.nominal_params:
+        value = space.nominal_params[slot.target].get(slot.attribute)
+        try:
+            return None if value is None else np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            return None
+    if slot.target in space.nominal_objects:
+        return space.nominal_objects[slot.target]["xyz".index(slot.attribute)]
+    if slot.target == ARM_TARGET and world is not None and world.arm is not None:
+        arm = world.arm
+        if slot.attribute == "start":
+            return arm.start if arm.start is not None else (START_CONFIG if arm.mjcf is None else None)
+        return arm.yaw if slot.attribute == "yaw" else arm.base["xyz".index(slot.attribute)]
+    return None  # a body of the world model: the middle of the bounds unless a nominal is given
+
+
+def _check_world(spec: Spec, world: WorldLayout, scenario: Scenario, source) -> None:
+    """Builds the nominal world once, so a missing file, site or body is reported now, not mid-search."""
+    from hritest.sim import World
+
+    placed = place(world, scenario)
+    if placed.arm is not None:  # the start's length is checked below, against the arm's joints
+        placed = replace(placed, arm=replace(placed.arm, start=world.arm.start))
+    try:
+        built = World(layout=placed)
+    except HritestError as exc:
+        raise source.error(("world",) if spec.world is not None else ("workspace",), str(exc)) from None
+    joints = len(built.joint_names) if world.arm is not None else 0
+    for i, p in enumerate(spec.parameters):
+        if p.bind == f"{ARM_TARGET}.start" and p.size != joints:
+            raise source.error(("parameters", i, "size"),
+                               f"arm.start needs one angle per arm joint: set size: {joints}")

@@ -14,9 +14,10 @@ from typing import Any
 
 import numpy as np
 
-from hritest.domain import Domain
-from hritest.scenario import Scenario
+from hritest import contract
+from hritest.domain import Domain, plugin_params
 from hritest.protocols import Rollout
+from hritest.scenario import Scenario
 
 OK = "ok"
 
@@ -81,18 +82,20 @@ def evaluate_with_rollout(domain: Domain, theta: np.ndarray, *, seed: int = 0) -
 def simulate(domain: Domain, scenario: Scenario, *, seed: int) -> Rollout:
     """Builds the plugins for ``scenario`` and runs one episode; exceptions propagate."""
     task_rng, robot_rng, human_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(3))
-    task = domain.task_cls(params=_params(domain.task_cls, scenario.task), scenario=scenario, spec=domain.spec)
-    robot = domain.robot_cls(params=_params(domain.robot_cls, scenario.robot), scenario=scenario, rng=robot_rng)
-    human = domain.human_cls(params=_params(domain.human_cls, scenario.human), scenario=scenario, rng=human_rng)
+    task = domain.task_cls(context=domain.context(scenario))
+    robot = domain.robot_cls(params=plugin_params(domain.robot_cls, scenario.robot), scenario=scenario, rng=robot_rng)
+    human = domain.human_cls(params=plugin_params(domain.human_cls, scenario.human), scenario=scenario, rng=human_rng)
     return task.run(robot=robot, human=human, rng=task_rng)
 
 
-def _params(cls: type, values: dict[str, Any]) -> Any:
-    model = getattr(cls, "Params", None)
-    return model.model_validate(values) if model is not None else dict(values)
-
-
 def _score(domain: Domain, scenario: Scenario, rollout: Rollout, base: dict) -> Evaluation:
+    broken = contract.rollout_problems(domain.task_cls, rollout)
+    if broken:
+        return Evaluation(**base, status="plugin_error",
+                          message=f"task plugin {domain.task_cls.__qualname__} broke the contract: " + "; ".join(broken))
+    missing = contract.missing_metrics(domain.task_cls, rollout)
+    if missing:
+        return Evaluation(**base, status="metric_error", message="; ".join(missing))
     env: dict[str, Any] = {**rollout.metrics, **scenario.values}
     try:
         objective = float(domain.objective.evaluate(env))
@@ -100,8 +103,7 @@ def _score(domain: Domain, scenario: Scenario, rollout: Rollout, base: dict) -> 
     except (KeyError, ZeroDivisionError, ValueError, TypeError) as exc:
         return Evaluation(**base, status="metric_error",
                           message=f"{type(exc).__name__}: {exc} (metrics: {sorted(rollout.metrics)})")
-    occupancy = (np.stack([rollout.occupancy[a] for a in domain.task_cls.agents])
-                 if rollout.occupancy else None)
+    occupancy = np.stack([rollout.grids[name] for name in domain.grids]) if domain.grids else None
     if not (math.isfinite(objective) and np.all(np.isfinite(measures))):
         return Evaluation(**base, status="nan", objective=objective, measures=measures,
                           metrics=dict(rollout.metrics),

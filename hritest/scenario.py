@@ -35,12 +35,18 @@ class Slot:
 
 @dataclass(frozen=True, kw_only=True)
 class Scenario:
-    """One concrete scenario: where the objects are and the agents' model parameters."""
+    """One concrete scenario: where things are and the agents' model parameters.
+
+    ``objects``: each placed object's centre ``(x, y, z)``, in the spec's order. ``bodies``: what
+    the scenario sets on the world (``"arm"`` and named bodies of the world model), attribute ->
+    value, for the bound attributes only. ``values``: every parameter by name.
+    """
 
     objects: Mapping[str, np.ndarray]
     human: Mapping[str, Any]
     robot: Mapping[str, Any]
     task: Mapping[str, Any]
+    bodies: Mapping[str, Mapping[str, float | np.ndarray]] = field(default_factory=dict)
     values: Mapping[str, float | np.ndarray] = field(default_factory=dict)
 
 
@@ -81,14 +87,17 @@ class ScenarioSpace:
         values = self.values(theta)
         objects = {name: pos.copy() for name, pos in self.nominal_objects.items()}
         params = {agent: dict(p) for agent, p in self.nominal_params.items()}
+        bodies: dict[str, dict[str, float | np.ndarray]] = {}
         for slot in self.slots:
             value = values[slot.name]
             if slot.target in params:
                 params[slot.target][slot.attribute] = value
+            elif slot.target in objects:
+                objects[slot.target]["xyz".index(slot.attribute)] = value
             else:
-                objects[slot.target]["xy".index(slot.attribute)] = value
+                bodies.setdefault(slot.target, {})[slot.attribute] = value
         return Scenario(objects=objects, human=params["human"], robot=params["robot"], task=params["task"],
-                        values=values)
+                        bodies=bodies, values=values)
 
     def _check(self, theta: np.ndarray) -> np.ndarray:
         theta = np.asarray(theta, dtype=float)

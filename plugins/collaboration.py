@@ -17,15 +17,15 @@ the idle robot may also move once the human has finished, and the robot's last b
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from dataclasses import dataclass, field, replace
+from typing import ClassVar
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from hritest import metrics
-from hritest.protocols import Rollout
-from hritest.sim import shared_world, world_layout
+from hritest.protocols import HumanPolicy, RobotPolicy, Rollout, TaskContext
+from hritest.sim import shared_world
 from hritest_plugins import hindsight, scene
 
 HAND_HEIGHT = 0.96
@@ -68,22 +68,24 @@ class CollaborationTask:
         "completion_time", "min_goal_distance", "max_wrong_goal_probability", "robot_path_length",
         "human_path_length", "total_wait_time", "human_wait_time", "robot_wait_time", "replans",
     )
-    agents: ClassVar[tuple[str, ...]] = ("human", "robot")
+    grids: ClassVar[dict[str, tuple[int, int]]] = {"human": (32, 32), "robot": (32, 32)}
     Params = _Params
 
-    def __init__(self, *, params: _Params, scenario: Any, spec: Any) -> None:
-        self.params = params
-        self.scenario = scenario
-        self.names = [o.name for o in spec.objects]
+    def __init__(self, *, context: TaskContext) -> None:
+        self.params = params = context.params
+        self.scenario = context.scenario
+        self.names = list(context.scenario.objects)
+        if context.world is None or not self.names:
+            raise ValueError("the collaboration task needs a workspace with objects (the boxes) in its spec")
         order = params.goal_order or self.names
         unknown = sorted(set(order) - set(self.names))
         if unknown or len(set(order)) != len(order):
             raise ValueError(f"task.params.goal_order {order} must list distinct objects of {self.names}")
         self.order = [self.names.index(name) for name in order]
-        self.dt = spec.task.dt
-        self.ticks = int(round(spec.task.time_limit / self.dt))
+        self.dt = context.dt
+        self.ticks = context.ticks
         self.start = np.array([*params.human_start, HAND_HEIGHT])
-        self.layout = world_layout(spec, scenario, hand_start=tuple(self.start))
+        self.layout = replace(context.world, hand_start=tuple(self.start))
 
     def _ticks(self, seconds: float) -> int:
         return int(round(seconds / self.dt))
@@ -97,7 +99,7 @@ class CollaborationTask:
             blocked[agent.goal], agent.state, agent.timer = who, "working", self._ticks(work_time)
             record.event(t, f"{who} starts work on {self.names[agent.goal]}")
 
-    def run(self, *, robot: Any, human: Any, rng: np.random.Generator) -> Rollout:
+    def run(self, *, robot: RobotPolicy, human: HumanPolicy, rng: np.random.Generator) -> Rollout:
         p, world = self.params, shared_world(self.layout)
         targets = scene.goal_targets(self.scenario, self.names)
         goals = np.array([self.scenario.objects[n] for n in self.names], dtype=float)
@@ -111,7 +113,7 @@ class CollaborationTask:
         hand_pose[:3, :3] = hindsight.GOAL_ROTATION
         h, r = _Agent("moving"), _Agent("moving")
         blocked: dict[int, str] = {}
-        record = _Record()
+        record = _Record(world.tracer())
         who_h, who_r = f"human plugin {type(human).__name__}", f"robot plugin {type(robot).__name__}"
         tick = 0
         for tick in range(self.ticks):
@@ -156,7 +158,8 @@ class CollaborationTask:
             # Wrong-goal probability counts while the human heads for its goal: between goals the
             # belief still (rightly) names the box just finished, which says nothing of inference.
             human_goal = self.order[len(h.done_goals)] if h.state == "moving" else None
-            record.tick(pose, world.q, hand, h.state, r.state, action.belief, human_goal)
+            world.set_hand(hand)
+            record.tick(pose, hand, h.state, r.state, action.belief, human_goal)
             # A pause entered on this tick (a replan) starts counting down on the next, like work.
             counting = r.state in ("working", "resetting", "replanning")
             if r.state == "moving":
@@ -206,8 +209,9 @@ def _flip(angle: float) -> float:
 class _Record:
     """Per-tick arrays of one episode, turned into a :class:`Rollout` at the end."""
 
-    def __init__(self) -> None:
-        self.ee, self.joints, self.hand, self.beliefs = [], [], [], []
+    def __init__(self, tracer) -> None:  # noqa: ANN001 - a hritest.sim world tracer
+        self.tracer = tracer
+        self.ee, self.hand, self.beliefs = [], [], []
         self.human_goals: list[int] = []  # per belief: the human's goal, -1 while it has none
         self.states: dict[str, list[str]] = {"human": [], "robot": []}
         self.events: list[tuple[float, str]] = []
@@ -216,10 +220,10 @@ class _Record:
     def event(self, t: float, text: str) -> None:
         self.events.append((t, text))
 
-    def tick(self, ee_pose: np.ndarray, joints: np.ndarray, hand: np.ndarray, human_state: str,
-             robot_state: str, belief: np.ndarray | None, human_goal: int | None) -> None:
+    def tick(self, ee_pose: np.ndarray, hand: np.ndarray, human_state: str, robot_state: str,
+             belief: np.ndarray | None, human_goal: int | None) -> None:
+        self.tracer.capture()
         self.ee.append(ee_pose[:3, 3].copy())
-        self.joints.append(joints)
         self.hand.append(hand.copy())
         self.states["human"].append(human_state)
         self.states["robot"].append(robot_state)
@@ -255,18 +259,18 @@ class _Record:
         }
         if not finished:
             self.event(completion, "time limit reached")
+        beliefs = np.array(self.beliefs)
         return Rollout(
             dt=task.dt,
             time=np.arange(len(ee)) * task.dt,
-            robot_ee=ee,
-            joints=np.array(self.joints),
-            human_hand=hand,
-            belief=np.array(self.beliefs) if self.beliefs else None,
+            metrics=values,
+            trajectories={"robot/ee": ee, "human/hand": hand},
+            series={f"belief/{name}": beliefs[:, i] for i, name in enumerate(task.names)} if len(beliefs) else {},
             states=self.states,
             events=self.events,
-            metrics=values,
-            occupancy={
+            grids={
                 "human": metrics.occupancy_grid(hand, x=p.occupancy_x, y=p.occupancy_y),
                 "robot": metrics.occupancy_grid(ee, x=p.occupancy_x, y=p.occupancy_y),
             },
+            scene=self.tracer.finish(),
         )

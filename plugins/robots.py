@@ -14,7 +14,7 @@ from typing import Any, ClassVar, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from hritest.protocols import RobotAction
+from hritest_plugins.actions import RobotAction
 from hritest_plugins import hindsight
 
 

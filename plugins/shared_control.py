@@ -9,14 +9,14 @@ reaching another goal does not end it.
 from __future__ import annotations
 
 import math
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from hritest import metrics
-from hritest.protocols import Rollout
-from hritest.sim import shared_world, world_layout
+from hritest.protocols import HumanPolicy, RobotPolicy, Rollout, TaskContext
+from hritest.sim import shared_world
 from hritest_plugins import hindsight, scene
 
 
@@ -33,7 +33,7 @@ class SharedControlTask:
         "completion_time", "min_goal_distance", "human_variation", "max_wrong_goal_probability",
         "robot_path_length",
     )
-    agents: ClassVar[tuple[str, ...]] = ("robot",)
+    grids: ClassVar[dict[str, tuple[int, int]]] = {"robot": (32, 32)}
 
     class Params(BaseModel):
         model_config = ConfigDict(extra="forbid", frozen=True)
@@ -43,30 +43,33 @@ class SharedControlTask:
         occupancy_x: tuple[float, float] = (0.4, 0.7)
         occupancy_y: tuple[float, float] = (-0.1, 0.2)
 
-    def __init__(self, *, params: Params, scenario: Any, spec: Any) -> None:
-        self.params = params
-        self.scenario = scenario
-        self.goal_names = [o.name for o in spec.objects]
+    def __init__(self, *, context: TaskContext) -> None:
+        self.params = params = context.params
+        self.scenario = context.scenario
+        self.goal_names = list(context.scenario.objects)
         if params.true_goal not in self.goal_names:
             raise ValueError(f"task.params.true_goal {params.true_goal!r} is not one of the objects "
                              f"{self.goal_names}")
-        self.dt = spec.task.dt
-        self.ticks = int(round(spec.task.time_limit / self.dt))
-        self.layout = world_layout(spec, scenario, hand_start=None)
+        if context.world is None:
+            raise ValueError("the shared control task needs a world: give the spec a workspace or world.arm")
+        self.dt = context.dt
+        self.ticks = context.ticks
+        self.layout = context.world
 
-    def run(self, *, robot: Any, human: Any, rng: np.random.Generator) -> Rollout:
+    def run(self, *, robot: RobotPolicy, human: HumanPolicy, rng: np.random.Generator) -> Rollout:
         p, world = self.params, shared_world(self.layout)
+        tracer = world.tracer()
         targets = scene.goal_targets(self.scenario, self.goal_names)
         true = self.goal_names.index(p.true_goal)
         true_targets = hindsight.prepare_targets(targets[true])
         goal_position = self.scenario.objects[p.true_goal]
-        ee, joints, beliefs, events = [], [], [], []
+        ee, beliefs, events = [], [], []
         reached = False
         who_h, who_r = f"human plugin {type(human).__name__}", f"robot plugin {type(robot).__name__}"
         for tick in range(self.ticks + 1):
             pose = world.ee_pose()
             ee.append(pose[:3, 3].copy())
-            joints.append(world.q)
+            tracer.capture()
             if scene.at_goal(pose, true_targets, distance=p.position_tolerance, angle=p.angle_tolerance):
                 reached = True
                 events.append((tick * self.dt, f"reached {p.true_goal}"))
@@ -94,10 +97,11 @@ class SharedControlTask:
         return Rollout(
             dt=self.dt,
             time=np.arange(len(ee)) * self.dt,
-            robot_ee=ee_array,
-            joints=np.array(joints),
-            belief=belief,
-            events=events,
             metrics=values,
-            occupancy={"robot": metrics.occupancy_grid(ee_array, x=p.occupancy_x, y=p.occupancy_y)},
+            trajectories={"robot/ee": ee_array},
+            series={f"belief/{name}": belief[:, i] for i, name in enumerate(self.goal_names)}
+            if belief is not None else {},
+            events=events,
+            grids={"robot": metrics.occupancy_grid(ee_array, x=p.occupancy_x, y=p.occupancy_y)},
+            scene=tracer.finish(),
         )

@@ -9,8 +9,9 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, PrivateAttr, StringConstraints
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, PrivateAttr, StringConstraints, model_validator
 
+from hritest.sim.layout import ROBOT_BASE
 from hritest.spec import expr
 
 Name = Annotated[
@@ -86,12 +87,41 @@ class RegionSpec(Strict):
 
 
 class WorkspaceSpec(Strict):
-    table: BoxSpec
+    """A tabletop: the table (the only thing the built-in arm can collide with) and placement regions."""
+
+    table: BoxSpec | None = None
     regions: list[RegionSpec] = Field(default_factory=list)
 
 
+class ArmSpec(Strict):
+    """The robot arm: an MJCF file (default: the built-in Mico-like 6-DoF arm) and where it stands.
+
+    Parameters bind ``arm.x``, ``arm.y``, ``arm.z``, ``arm.yaw`` and ``arm.start`` (a group of
+    one angle per joint) to move it per scenario.
+    """
+
+    model: str | None = Field(None, description="arm MJCF, relative to the spec's folder; hinge joints, "
+                                                "a tool site and a velocity_limits numeric")
+    ee_site: str = Field("ee", description="the name of the arm's tool site")
+    base: Vec3 = Field(ROBOT_BASE, description="where the arm file's origin stands (m)")
+    yaw: float = Field(0.0, description="rad, about world z")
+    start: list[float] | None = Field(None, description="joint angles at reset; default: the model's own")
+
+
+class WorldSpec(Strict):
+    """The MuJoCo world a task may simulate in: a scene model of its own and the robot arm.
+
+    Bodies of ``model`` can be moved by parameters (``<body>.x``, ``.y``, ``.z``, ``.yaw``).
+    Without a ``world`` section, a spec with a ``workspace`` gets the built-in arm, as the
+    paper's domains do.
+    """
+
+    model: str | None = Field(None, description="scene MJCF, relative to the spec's folder")
+    arm: ArmSpec | None = None
+
+
 class ObjectSpec(Strict):
-    """A goal object: a box, at a nominal position that parameters may move in x and y."""
+    """A placed object: a box, at a nominal position that parameters may move in x, y and z."""
 
     name: Name
     half_size: HalfSize
@@ -101,15 +131,33 @@ class ObjectSpec(Strict):
 class ParameterSpec(Strict):
     """Binds ``size`` components of the scenario vector theta to one target.
 
-    ``bind`` is ``<object>.x``, ``<object>.y``, ``human.<param>``, ``robot.<param>`` or
-    ``task.<param>``; a group (``size > 1``) is passed to its target as an array.
+    ``bind`` is ``human.<param>``, ``robot.<param>``, ``task.<param>`` (a field of that plugin's
+    ``Params``), ``<object>.x|y|z``, ``arm.x|y|z|yaw|start`` or ``<body>.x|y|z|yaw`` for a named
+    body of the world model; a group (``size > 1``) is passed to its target as an array.
+    ``nominal`` is theta's value in the nominal scenario (``hritest check`` runs it); by default
+    the spec's own value of what it binds, else the middle of the bounds.
     """
 
     name: Name
     bind: str = Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*\.[A-Za-z][A-Za-z0-9_]*$")
     bounds: Interval
     size: PositiveInt = 1
+    nominal: float | list[float] | None = None
     description: str = ""
+
+    @model_validator(mode="after")
+    def _nominal_in_bounds(self) -> ParameterSpec:
+        if self.nominal is None:
+            return self
+        values = [self.nominal] if isinstance(self.nominal, float | int) else self.nominal
+        if len(values) not in (1, self.size):
+            raise ValueError(f"nominal has {len(values)} values; give one number or {self.size}")
+        lo, hi = self.bounds
+        outside = [v for v in values if not lo <= v <= hi]
+        if outside:
+            raise ValueError(f"nominal {outside} lies outside the bounds [{lo}, {hi}]; move it inside or widen "
+                             "the bounds")
+        return self
 
 
 class InsideConstraint(Strict):
@@ -227,8 +275,9 @@ class Spec(Strict):
     name: Name
     description: str = ""
     task: TaskSpec
-    workspace: WorkspaceSpec
-    objects: list[ObjectSpec] = Field(min_length=1)
+    world: WorldSpec | None = None
+    workspace: WorkspaceSpec | None = None
+    objects: list[ObjectSpec] = Field(default_factory=list)
     parameters: list[ParameterSpec] = Field(min_length=1)
     constraints: list[Constraint] = Field(default_factory=list)
     robot: PolicySpec

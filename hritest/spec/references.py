@@ -8,10 +8,12 @@ from __future__ import annotations
 from collections.abc import Collection, Iterator
 
 from hritest.spec import expr
+from hritest.sim.layout import ARM_ATTRIBUTES, BODY_ATTRIBUTES
 from hritest.spec.models import BoundsConstraint, Spec
 
 AGENT_TARGETS = ("human", "robot", "task")
-OBJECT_ATTRIBUTES = ("x", "y")
+ARM_TARGET = "arm"
+OBJECT_ATTRIBUTES = ("x", "y", "z")
 
 Found = Iterator[tuple[tuple[str | int, ...], str]]
 
@@ -31,7 +33,7 @@ def check_references(spec: Spec, *, metrics: Collection[str] | None = None) -> l
 
 def _duplicates(spec: Spec) -> Found:
     groups = {
-        "regions": [r.name for r in spec.workspace.regions],
+        "regions": [r.name for r in regions(spec)],
         "objects": [o.name for o in spec.objects],
     }
     for field, names in groups.items():
@@ -53,37 +55,67 @@ def _duplicates(spec: Spec) -> Found:
             seen.add(item.name)
 
 
+def has_arm(spec: Spec) -> bool:
+    """Whether the spec's world has a robot arm: ``world.arm``, or the built-in one of a tabletop spec."""
+    return spec.world.arm is not None if spec.world is not None else spec.workspace is not None
+
+
+def regions(spec: Spec) -> list:
+    return spec.workspace.regions if spec.workspace is not None else []
+
+
 def _bindings(spec: Spec) -> Found:
     objects = {o.name for o in spec.objects}
+    model = spec.world.model if spec.world is not None else None
     bound: dict[str, int] = {}
     for i, param in enumerate(spec.parameters):
         head, attribute = param.bind.split(".")
         path = ("parameters", i, "bind")
-        if head in objects:
+        if head in AGENT_TARGETS:
+            pass  # checked against the plugin's Params when the spec is compiled
+        elif head == ARM_TARGET:
+            if not has_arm(spec):
+                yield path, f"{param.bind!r} binds the robot arm, but this spec has none; add world.arm"
+            elif attribute not in ARM_ATTRIBUTES:
+                yield path, f"the arm's bindable attributes are {', '.join(ARM_ATTRIBUTES)}, not {attribute!r}"
+            elif attribute != "start" and param.size != 1:
+                yield ("parameters", i, "size"), f"{param.bind!r} is one number; remove 'size' or set it to 1"
+        elif head in objects:
             if attribute not in OBJECT_ATTRIBUTES:
-                yield path, f"an object parameter binds '{head}.x' or '{head}.y', not {param.bind!r}"
+                yield path, (f"an object parameter binds {', '.join(f'{head}.{a}' for a in OBJECT_ATTRIBUTES)}, "
+                             f"not {param.bind!r}")
             elif param.size != 1:
                 yield ("parameters", i, "size"), f"{param.bind!r} is one number; remove 'size' or set it to 1"
-        elif head not in AGENT_TARGETS:
-            known = ", ".join(sorted(objects) + list(AGENT_TARGETS))
-            yield path, f"unknown target {head!r} in {param.bind!r}; bind to one of: {known}"
+        elif model is not None:  # a body of the world model: its name is checked against the model file
+            if attribute not in BODY_ATTRIBUTES:
+                yield path, (f"a body of the world model binds {', '.join(BODY_ATTRIBUTES)}, "
+                             f"not {attribute!r}")
+            elif param.size != 1:
+                yield ("parameters", i, "size"), f"{param.bind!r} is one number; remove 'size' or set it to 1"
+        else:
+            known = ", ".join(sorted(objects) + list(AGENT_TARGETS) + ([ARM_TARGET] if has_arm(spec) else []))
+            yield path, (f"unknown target {head!r} in {param.bind!r}; bind to one of: {known} "
+                         "(or to a body of a world model named in world.model)")
         if param.bind in bound:
             yield path, f"{param.bind!r} is already bound by parameters[{bound[param.bind]}]"
         bound.setdefault(param.bind, i)
+    for i, obj in enumerate(spec.objects):
+        if obj.name in AGENT_TARGETS or obj.name == ARM_TARGET:
+            yield ("objects", i, "name"), f"{obj.name!r} is reserved for a bind target; rename the object"
 
 
 def _constraints(spec: Spec) -> Found:
     objects = {o.name for o in spec.objects}
-    regions = {r.name for r in spec.workspace.regions}
+    region_names = {r.name for r in regions(spec)}
     parameters = {p.name for p in spec.parameters}
     for i, constraint in enumerate(spec.constraints):
         for j, name in enumerate(getattr(constraint, "objects", [])):
             if name not in objects:
                 yield ("constraints", i, "objects", j), (
-                    f"unknown object {name!r}; the objects are {', '.join(sorted(objects))}")
+                    f"unknown object {name!r}; the objects are {', '.join(sorted(objects)) or 'none: add them under objects'}")
         for j, name in enumerate(getattr(constraint, "regions", [])):
-            if name not in regions:
-                known = ", ".join(sorted(regions)) or "none: add them under workspace.regions"
+            if name not in region_names:
+                known = ", ".join(sorted(region_names)) or "none: add them under workspace.regions"
                 yield ("constraints", i, "regions", j), f"unknown region {name!r}; the regions are {known}"
         if isinstance(constraint, BoundsConstraint):
             for j, group in enumerate(constraint.groups):

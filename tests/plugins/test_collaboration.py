@@ -83,7 +83,7 @@ def test_the_mdp_human_works_on_each_of_its_goals_in_order(theta):
     assert len(working) == 3
     for g, (start, n) in enumerate(working):
         assert n == round(5.0 / DT)  # human_work_time
-        hand = rollout.human_hand[start:start + n, :2]
+        hand = rollout.trajectories["human/hand"][start:start + n, :2]
         # At its box (the 1 cm arrival tolerance) and still while it works.
         assert np.linalg.norm(hand - goal_xy(theta, g), axis=1).max() < 0.011
         assert np.ptp(hand, axis=0).max() == 0.0
@@ -109,7 +109,7 @@ def test_both_wanting_the_same_box_makes_the_second_one_wait(theta, waiter, othe
     assert len(waiting) * DT == pytest.approx(m[f"{waiter}_wait_time"], abs=DT + 1e-9)
     assert np.all(np.diff(waiting) == 1)  # one stretch
     # ... spent standing at a box ...
-    position = (rollout.robot_ee if waiter == "robot" else rollout.human_hand)[waiting, :2]
+    position = (rollout.trajectories["robot/ee"] if waiter == "robot" else rollout.trajectories["human/hand"])[waiting, :2]
     assert np.ptp(position, axis=0).max() == 0.0
     distances = [np.linalg.norm(position[0] - goal_xy(theta, g)) for g in range(3)]
     g = int(np.argmin(distances))
@@ -149,13 +149,13 @@ def test_a_straight_line_the_arm_cannot_follow_triggers_replanning():
     assert len(replans) >= 1
     assert evaluation.metrics["replans"] == len(replans)
     tick = round(replans[0] / DT)
-    start_base = rollout.joints[0][0]
-    turned = rollout.joints[tick + 1][0] - start_base
+    start_base = rollout.scene.qpos[0][0]
+    turned = rollout.scene.qpos[tick + 1][0] - start_base
     assert abs(abs(turned) - np.pi) < 1e-9  # the new home faces the other workspace
     assert rollout.states["robot"][tick + 1] == "replanning"
     # After replanning it reaches and stamps the ws2 box.
     assert event_time(rollout, "robot starts work on goal1") > replans[0]
-    assert np.linalg.norm(rollout.robot_ee[-1, :2] - goal_xy(SPREAD, 1)) < 0.011
+    assert np.linalg.norm(rollout.trajectories["robot/ee"][-1, :2] - goal_xy(SPREAD, 1)) < 0.011
     # Boxes all in ws1 need no replanning.
     near, near_rollout = run(ALL_WS1)
     assert near.metrics["replans"] == 0.0
@@ -169,7 +169,7 @@ def test_a_replan_pauses_the_robot_as_long_as_replan_time_like_work_and_reset():
     for state, start, n in blocks(rollout.states["robot"])[:-1]:  # the last block is cut by the episode end
         lengths.setdefault(state, set()).add(n)
         if state == "replanning":
-            assert np.ptp(rollout.robot_ee[start:start + n], axis=0).max() == 0.0  # it holds still
+            assert np.ptp(rollout.trajectories["robot/ee"][start:start + n], axis=0).max() == 0.0  # it holds still
     assert lengths["working"] == {120}
     assert lengths["resetting"] == {120}
     assert lengths["replanning"] == {120}

@@ -24,6 +24,11 @@ GOAL_Z = 0.96
 LOW, HIGH = (0.66, -0.06), (0.54, 0.16)
 
 
+def beliefs(rollout) -> np.ndarray:  # noqa: ANN001
+    """The robot's belief per tick, one column per goal, from the rollout's ``belief/<goal>`` series."""
+    return np.column_stack([v for k, v in rollout.series.items() if k.startswith("belief/")])
+
+
 @cache
 def domain(name: str):
     return compile_spec(load_spec(SPECS / f"{name}.yaml"))
@@ -44,7 +49,7 @@ def theta_of(goal0, goal1, noise=NO_NOISE) -> tuple[float, ...]:
 
 def ee_speeds(rollout) -> np.ndarray:
     """End-effector speed (m/s) over each tick."""
-    return np.linalg.norm(np.diff(rollout.robot_ee, axis=0), axis=1) / rollout.dt
+    return np.linalg.norm(np.diff(rollout.trajectories["robot/ee"], axis=0), axis=1) / rollout.dt
 
 
 # --- belief and assistance ----------------------------------------------------------------
@@ -54,7 +59,7 @@ def ee_speeds(rollout) -> np.ndarray:
 def test_belief_moves_toward_the_goal_the_user_heads_for(goal0, goal1):
     # Swapping the goals swaps nothing in the belief's index: it follows the user, not the layout.
     _, rollout = run("teleop", theta_of(goal0, goal1))
-    belief = rollout.belief
+    belief = beliefs(rollout)
     assert belief is not None and belief.shape[1] == 2
     np.testing.assert_allclose(belief.sum(axis=1), 1.0, atol=1e-9)
     assert belief[0] == pytest.approx([0.5, 0.5], abs=0.01)  # uniform prior, one small step
@@ -73,7 +78,7 @@ def test_robot_reaches_the_true_goal_well_inside_the_time_limit(goal0, goal1):
     assert evaluation.objective < 6.0  # the limit is 10 s; the user alone would need ~5 s at 0.05 m/s
     assert not evaluation.failure
     assert rollout.events[-1][1] == "reached goal0"
-    end = rollout.robot_ee[-1]
+    end = rollout.trajectories["robot/ee"][-1]
     assert np.linalg.norm(end - [*goal0, GOAL_Z]) < 0.01  # the reference's 1 cm tolerance
     assert np.linalg.norm(end[:2] - np.array(goal1)) > 0.2
 
@@ -101,8 +106,8 @@ def test_the_same_theta_gives_the_same_evaluation_twice():
     assert a.metrics == b.metrics
     np.testing.assert_array_equal(a.theta_repaired, b.theta_repaired)
     assert a.failure == b.failure
-    np.testing.assert_array_equal(ra.robot_ee, rb.robot_ee)
-    np.testing.assert_array_equal(ra.belief, rb.belief)
+    np.testing.assert_array_equal(ra.trajectories["robot/ee"], rb.trajectories["robot/ee"])
+    np.testing.assert_array_equal(beliefs(ra), beliefs(rb))
     assert ra.events == rb.events
 
 
@@ -114,7 +119,7 @@ def test_blending_reaches_the_goal_and_follows_the_user_until_confident():
     evaluation, rollout = run("teleop_blend", theta_of(goal0, goal1))
     assert evaluation.objective < 20.0 and not evaluation.failure  # its time limit is 20 s
     assert rollout.events[-1][1] == "reached goal0"
-    assert np.linalg.norm(rollout.robot_ee[-1] - [*goal0, GOAL_Z]) < 0.01
+    assert np.linalg.norm(rollout.trajectories["robot/ee"][-1] - [*goal0, GOAL_Z]) < 0.01
 
     # While the top-two belief gap is at most the threshold (0.4), the arm moves exactly as the
     # user commands: no faster than the user's 0.05 m/s joystick speed ...
@@ -122,12 +127,12 @@ def test_blending_reaches_the_goal_and_follows_the_user_until_confident():
         top = np.sort(belief, axis=1)
         return top[:, -1] - top[:, -2] <= 0.4
 
-    quiet = low_confidence(rollout.belief)
+    quiet = low_confidence(beliefs(rollout))
     assert quiet.sum() > 40 and not quiet[-1]
     assert ee_speeds(rollout)[quiet].max() <= 0.05 * 1.02
     # ... whereas hindsight assistance adds its own twist at the same confidence.
     _, assisted = run("teleop", theta_of(goal0, goal1))
-    assert ee_speeds(assisted)[low_confidence(assisted.belief)].max() > 0.06
+    assert ee_speeds(assisted)[low_confidence(beliefs(assisted))].max() > 0.06
 
 
 # --- misbehaving robot plugins ------------------------------------------------------------
@@ -137,7 +142,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from hritest.protocols import RobotAction
+from hritest_plugins.actions import RobotAction
 
 
 class Robot:
@@ -189,11 +194,11 @@ def test_the_recorded_rollout_ends_at_the_reported_completion_time():
     assert rollout.time[-1] == pytest.approx(completion, abs=1e-9)
     assert rollout.events[-1][0] == pytest.approx(completion, abs=1e-9)
     n = len(rollout.time)
-    assert rollout.robot_ee.shape == (n, 3) and len(rollout.joints) == n
-    assert len(rollout.belief) == n - 1  # the robot acts on every tick but the one at the goal
+    assert rollout.trajectories["robot/ee"].shape == (n, 3) and len(rollout.scene.qpos) == n
+    assert len(beliefs(rollout)) == n - 1  # the robot acts on every tick but the one at the goal
     np.testing.assert_allclose(np.diff(rollout.time), rollout.dt)
     # The end effector starts where the user's path does.
-    assert rollout.robot_ee[0][:2] == pytest.approx([0.41, 0.05], abs=0.01)
+    assert rollout.trajectories["robot/ee"][0][:2] == pytest.approx([0.41, 0.05], abs=0.01)
 
 
 def test_an_episode_that_never_reaches_the_goal_is_recorded_to_the_time_limit():
@@ -201,4 +206,4 @@ def test_an_episode_that_never_reaches_the_goal_is_recorded_to_the_time_limit():
     assert evaluation.objective == pytest.approx(10.0) and evaluation.failure  # failure: objective >= 10
     assert rollout.time[-1] == pytest.approx(10.0, abs=1e-9)
     assert not any("reached" in text for _, text in rollout.events)
-    assert np.linalg.norm(rollout.robot_ee[-1][:2] - [0.66, 0.05]) >= 0.01
+    assert np.linalg.norm(rollout.trajectories["robot/ee"][-1][:2] - [0.66, 0.05]) >= 0.01

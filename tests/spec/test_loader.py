@@ -12,6 +12,11 @@ from hritest.errors import SpecError
 from hritest.spec import load_spec
 
 
+# Placed objects for the toy spec, which has none: a workspace region and one box.
+PLACED = ("workspace:\n  regions:\n    - {name: ws1, x: [0.5, 0.7], y: [-0.1, 0.2]}\n"
+          "objects:\n  - {name: goal0, half_size: [0.032, 0.032, 0.032], position: [0.6, 0.05, 0.96]}\n")
+
+
 def error_of(path: Path, *, compile: bool = True) -> SpecError:
     with pytest.raises(SpecError) as info:
         spec = load_spec(path)
@@ -52,9 +57,9 @@ def test_the_toy_spec_loads_and_compiles(toy_spec):
         ("range: [0, 0.32], cells: 16", "range: [0.32, 0.1], cells: 16", "measures[0].range", "0.32, 0.1",
          ["lower end must be below the upper end"]),
         # A parameter bound to an unknown object.
-        ("bind: goal1.x", "bind: goal9.x", "parameters[2].bind", "goal9.x", ["unknown target 'goal9'"]),
+        ("bind: task.g1x", "bind: goal9.x", "parameters[2].bind", "goal9.x", ["unknown target 'goal9'"]),
         # A constraint naming an unknown region: needs an inside constraint.
-        ("constraints:\n", "constraints:\n  - {type: inside, objects: [goal0], regions: [ws7]}\n",
+        ("constraints:\n", PLACED + "constraints:\n  - {type: inside, objects: [goal0], regions: [ws7]}\n",
          "constraints[0].regions[0]", "ws7", ["unknown region 'ws7'", "ws1"]),
         # A duplicate name.
         ("{name: variation,", "{name: goal_distance,", "measures[1].name", "{name: goal_distance, expr: norm",
@@ -62,7 +67,7 @@ def test_the_toy_spec_loads_and_compiles(toy_spec):
         # A measure with lo >= hi written as equal ends.
         ("range: [0, 0.087]", "range: [0.087, 0.087]", "measures[1].range", "0.087, 0.087", ["lower end"]),
         # A box that is not a box.
-        ("{name: goal0, half_size: [0.032, 0.032, 0.032]", "{name: goal0, half_size: [0.032, -0.032, 0.032]",
+        ("constraints:\n", PLACED.replace("half_size: [0.032, 0.032", "half_size: [0.032, -0.032") + "constraints:\n",
          "objects[0].half_size", "-0.032", ["every half size must be positive"]),
         # Unknown constraint type.
         ("- {type: bounds,", "- {type: fence,", "constraints[0]", "type: fence", ["inside", "no_overlap"]),
@@ -180,8 +185,9 @@ def test_missing_required_key_points_at_parent(toy_spec):
 
 
 def test_every_issue_is_reported_at_once(toy_spec):
-    path = toy_spec("bind: goal1.x", "bind: goal9.x")
-    path.write_text(path.read_text().replace("cells: 16}\n  - {name: variation", "cells: 0}\n  - {name: variation"))
+    path = toy_spec("constraints:\n", PLACED + "constraints:\n")
+    path.write_text(path.read_text().replace("bind: task.g1x", "bind: goal9.x").replace(
+        "cells: 16}\n  - {name: variation", "cells: 0}\n  - {name: variation"))
     error = error_of(path)
     assert {issue.field for issue in error.issues} == {"measures[0].cells"}  # structure is checked first
     path.write_text(path.read_text().replace("cells: 0}", "cells: 16}").replace("regions:\n", "regions:\n    - {name: ws1, x: [0, 1], y: [0, 1]}\n"))
