@@ -1,7 +1,15 @@
-"""Rerun recordings of real simulations, read back from the .rrd with rerun's own reader."""
+"""Rerun recordings of hand-built rollouts, read back from the .rrd with rerun's own reader.
+
+The rollouts are built here, not simulated by the bundled plugins, so these tests pin what a
+recording draws for each field of :class:`hritest.protocols.Rollout`, whatever the tasks report.
+The scene test traces a real :class:`hritest.sim.World` and checks the recording against
+:class:`hritest.sim.SceneReplay`, which poses the same world again.
+"""
 
 from __future__ import annotations
 
+from collections import Counter
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -9,84 +17,243 @@ import pytest
 from rerun.chunk import RrdReader
 
 from hritest.domain import compile_spec
-from hritest.evaluate import evaluate_with_rollout
+from hritest.evaluate import Evaluation
+from hritest.protocols import Rollout
 from hritest.recording import (
     APPLICATION_ID,
     TIMELINE,
+    WORLD_FRAME,
     RecordingError,
-    occupancy_image,
+    grid_image,
     recorded_entities,
     recording_ids,
     write_recording,
 )
-from hritest.replay import scenario_digest
 from hritest.spec import load_spec
 
-SPECS = Path(__file__).parent.parent / "specs"
-TELEOP_THETA = [0.6, 0.05, 0.6, 0.09, 0.0, 0.01, -0.01, 0.0, 0.0]  # reaches goal0 in a few seconds
-# Three boxes already inside the regions (nothing to repair); the team takes about 29 s.
-COLLAB_THETA = [0.6796, 0.1265, 0.52, 0.1192, 0.5417, -0.0455]
-
-
-def record(tmp_path: Path, spec: str, theta: list[float], seed: int = 0):  # noqa: ANN201
-    domain = compile_spec(load_spec(SPECS / spec))
-    evaluation, rollout = evaluate_with_rollout(domain, np.array(theta), seed=seed)
-    assert evaluation.ok, evaluation.message
-    digest = scenario_digest("spec-digest", evaluation.theta_repaired, seed)
-    path = write_recording(tmp_path / "sub" / "scenario.rrd", domain=domain, evaluation=evaluation, rollout=rollout,
-                           recording_id=digest, title="test")
-    return path, rollout, digest
+TOY = Path(__file__).parent / "fixtures" / "toy.yaml"
+DT = 0.025
 
 
 @pytest.fixture(scope="module")
-def teleop(tmp_path_factory):  # noqa: ANN201
-    return record(tmp_path_factory.mktemp("teleop"), "teleop.yaml", TELEOP_THETA)
+def domain():  # noqa: ANN201
+    return compile_spec(load_spec(TOY))
 
 
-def test_teleop_recording_holds_the_scene_arm_belief_and_scenario(teleop):
-    path, rollout, digest = teleop
+@pytest.fixture(scope="module")
+def evaluation(domain):  # noqa: ANN001, ANN201
+    theta = np.linspace(0.0, 0.1, len(domain.space.labels))
+    return Evaluation(theta=theta, theta_repaired=theta, repair_cost=0.0, regions={}, seed=7, objective=9.0,
+                      measures=np.array([0.1, 0.02]), metrics={"completion_time": 9.0}, failure=True)
+
+
+def record(tmp_path: Path, domain, evaluation, rollout: Rollout) -> Path:  # noqa: ANN001
+    return write_recording(tmp_path / "sub" / "scenario.rrd", domain=domain, evaluation=evaluation,
+                           rollout=rollout, recording_id="digest", title="test")
+
+
+def components(path: Path, entity: str) -> tuple[dict, list[dict]]:
+    """``(static row, rows in time order)`` of one entity: component name -> value."""
+    static, timed = {}, {}
+    for chunk in RrdReader(path).stream().to_chunks():
+        if str(chunk.entity_path) != f"/{entity}":
+            continue
+        batch = chunk.to_record_batch()
+        times = (batch.column(TIMELINE).cast("int64").to_pylist() if TIMELINE in chunk.timeline_names
+                 else [None] * batch.num_rows)
+        for i, t in enumerate(times):
+            row = static if t is None else timed.setdefault(t, {})
+            row.update({name: batch.column(name)[i].as_py() for name in batch.schema.names if ":" in name})
+    return static, [timed[t] for t in sorted(timed)]
+
+
+def views(path: Path) -> list[tuple[str, str]]:
+    """``(view class, origin)`` of each view of the file's default blueprint."""
+    reader = RrdReader(path)
+    [blueprint] = reader.blueprints()
+    found = []
+    for chunk in reader.stream(store=blueprint).to_chunks():
+        batch = chunk.to_record_batch()
+        if "ViewBlueprint:class_identifier" in batch.schema.names:
+            found.append((batch.column("ViewBlueprint:class_identifier")[0].as_py()[0],
+                          batch.column("ViewBlueprint:space_origin")[0].as_py()[0]))
+    return sorted(found)
+
+
+def test_a_rollout_of_only_metrics_records_the_scenario_and_the_verdict(tmp_path, domain, evaluation):
+    rollout = Rollout(dt=DT, time=np.arange(40) * DT, metrics={"completion_time": 9.0})
+    path = record(tmp_path, domain, evaluation, rollout)
     entities = recorded_entities(path)
-    for static in ("world/table", "world/regions", "world/goals", "world/robot/ee_path", "scenario",
-                   "occupancy/robot"):
-        assert static in entities, static
-        assert entities[static] == [], f"{static} should be static"
-    end = float(rollout.time[-1])
-    for moving in ("world/robot/links", "world/robot/ee"):
-        times = entities[moving]
-        assert len(times) == len(rollout.time)
-        assert times[0] == 0.0 and times[-1] == pytest.approx(end)
-    assert end > 1.0  # the episode is seconds long, not one tick
-    for goal in ("belief/goal0", "belief/goal1"):
-        assert len(entities[goal]) == len(rollout.belief)
-    assert len(entities["events"]) == len(rollout.events) + 1  # "reached goal0", then the verdict
-    assert entities["events"][-1] == pytest.approx(end)
-    assert recording_ids(path) == [(APPLICATION_ID, digest)]
-    assert RrdReader(path).blueprints(), "the file carries its default blueprint"
+    assert {"scenario", "events"} <= set(entities)
+    assert not any(e.startswith(("world", "series", "states", "grids")) for e in entities)
+    assert entities["scenario"] == []
+    assert entities["events"] == [pytest.approx(39 * DT)]  # the verdict, at the episode's end
+    _, [verdict] = components(path, "events")
+    assert verdict["TextLog:text"][0].startswith("episode ends: objective 9, FAILURE (objective >= 8)")
+    document, _ = components(path, "scenario")
+    assert "| goal_distance | 0.1 |" in document["TextDocument:text"][0]
+    assert views(path) == [("TextDocument", "scenario"), ("TextLog", "/")]  # no empty 3D or series view
+    assert recording_ids(path) == [(APPLICATION_ID, "digest")]
     assert not list(path.parent.glob(".*")), "no temporary file is left behind"
 
 
-def test_arm_capsules_form_a_chain_ending_at_the_end_effector(teleop):
-    path, rollout, _ = teleop
-    rows = {}
-    for chunk in RrdReader(path).stream().to_chunks():
-        if str(chunk.entity_path) in ("/world/robot/links", "/world/robot/ee") and TIMELINE in chunk.timeline_names:
-            batch = chunk.to_record_batch()
-            times = batch.column(TIMELINE).cast("int64").to_pylist()
-            for i, t in enumerate(times):
-                row = rows.setdefault(t, {})
-                for name in batch.schema.names:
-                    if ":" in name:
-                        row[name] = batch.column(name)[i].as_py()
-    tick = len(rollout.time) // 2
-    row = rows[int(round(float(rollout.time[tick]) * 1e9))]
-    starts = np.array(row["Capsules3D:translations"])
-    lengths = np.array(row["Capsules3D:lengths"])
-    ends = np.array([start + _rotate(q, [0.0, 0.0, length]) for start, q, length in
-                     zip(starts, row["Capsules3D:quaternions"], lengths)])
-    assert len(lengths) >= 6 and np.all(lengths > 0)
-    np.testing.assert_allclose(ends[:-1], starts[1:], atol=1e-5)  # each link starts where the last ended
-    np.testing.assert_allclose(ends[-1], rollout.robot_ee[tick], atol=1e-5)  # and the last at the tool
-    np.testing.assert_allclose(row["Points3D:positions"][0], rollout.robot_ee[tick], atol=1e-6)
+@pytest.fixture(scope="module")
+def full(tmp_path_factory, domain, evaluation):  # noqa: ANN001, ANN201
+    time = np.arange(12) * DT
+    rollout = Rollout(
+        dt=DT, time=time, metrics={"completion_time": 9.0},
+        trajectories={"robot/ee": np.linspace([0.4, 0.3, 0.9], [0.6, 0.0, 1.0], 12),
+                      "human/hand": np.linspace([1.0, 0.0, 1.0], [0.7, 0.1, 0.95], 12)},
+        series={"belief/goal0": np.linspace(0.5, 1.0, 10), "distance": np.linspace(1.0, 0.0, 12)},
+        states={"robot": ["idle"] * 3 + ["reach"] * 6 + ["done"] * 3, "human": ["walk"] * 12},
+        events=[(0.1, "reached goal0")],
+        grids={"robot": np.arange(16.0).reshape(4, 4), "human": np.eye(4)},
+    )
+    return record(tmp_path_factory.mktemp("full"), domain, evaluation, rollout), rollout
+
+
+def test_trajectories_are_a_point_per_tick_and_a_static_path_in_the_world_frame(full):
+    path, rollout = full
+    entities = recorded_entities(path)
+    for name, points in rollout.trajectories.items():
+        static, rows = components(path, f"world/{name}")
+        assert len(rows) == len(rollout.time)
+        np.testing.assert_allclose(rows[-1]["Points3D:positions"], points[-1:], atol=1e-6)
+        assert static["CoordinateFrame:frame"] == [WORLD_FRAME]  # not under a body named "robot"
+        assert entities[f"world/{name}/path"] == []
+        path_row, _ = components(path, f"world/{name}/path")
+        np.testing.assert_allclose(path_row["LineStrips3D:strips"][0], points, atol=1e-6)
+
+
+def test_series_are_scalars_over_their_own_ticks(full):
+    path, rollout = full
+    for name, values in rollout.series.items():
+        _, rows = components(path, f"series/{name}")
+        np.testing.assert_allclose([row["Scalars:scalars"][0] for row in rows], values)
+    assert recorded_entities(path)["series/belief/goal0"][-1] == pytest.approx(9 * DT)
+
+
+def test_states_are_logged_on_change_and_events_end_with_the_verdict(full):
+    path, rollout = full
+    entities = recorded_entities(path)
+    assert entities["states/robot"] == [0.0, pytest.approx(3 * DT), pytest.approx(9 * DT)]
+    assert entities["states/human"] == [0.0]
+    _, events = components(path, "events")
+    assert events[0]["TextLog:text"] == ["reached goal0"]
+    assert entities["events"] == [pytest.approx(0.1), pytest.approx(11 * DT)]
+
+
+def test_grids_are_static_images_with_y_up(full):
+    path, rollout = full
+    for name, grid in rollout.grids.items():
+        static, rows = components(path, f"grids/{name}")
+        assert rows == []
+        [form], [buffer] = static["Image:format"], static["Image:buffer"]
+        image = np.array(buffer, dtype=np.uint8).reshape(form["height"], form["width"])
+        np.testing.assert_array_equal(image, grid_image(grid))
+
+
+def test_the_blueprint_has_a_view_for_each_kind_of_data(full):
+    path, _ = full
+    assert views(path) == [("2D", "/grids/human"), ("2D", "/grids/robot"), ("3D", "world"),
+                           ("TextDocument", "scenario"), ("TextLog", "/"), ("TimeSeries", "series")]
+
+
+def test_grid_image_puts_x_right_and_y_up():
+    grid = np.zeros((32, 32))
+    grid[31, 0] = 1.0  # high x, low y
+    image = grid_image(grid)
+    assert image.dtype == np.uint8 and image.shape == (32, 32)
+    assert image[31, 31] == 255  # bottom row (low y), right column (high x)
+
+
+def test_an_unwritable_recording_path_is_a_clear_error(tmp_path, domain, evaluation):
+    rollout = Rollout(dt=DT, time=np.arange(3) * DT, metrics={})
+    (tmp_path / "file").write_text("not a folder")
+    with pytest.raises(RecordingError, match="cannot write the recording"):
+        write_recording(tmp_path / "file" / "x.rrd", domain=domain, evaluation=evaluation, rollout=rollout,
+                        recording_id="x")
+    with pytest.raises(RecordingError, match="is a folder"):
+        write_recording(tmp_path, domain=domain, evaluation=evaluation, rollout=rollout, recording_id="x")
+
+
+# The scene: a real world traced for a few ticks, recorded, and compared with its replay.
+
+TICKS = 6
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory, domain, evaluation):  # noqa: ANN001, ANN201
+    from hritest.sim import SceneReplay, World
+    from hritest.sim.layout import Box, WorldLayout
+
+    layout = WorldLayout(table=Box(name="table", center=(0.6, 0.05, 0.845), half_size=(0.2, 0.3, 0.021)),
+                         objects=(Box(name="goal0", center=(0.6, 0.1, 0.9), half_size=(0.03, 0.03, 0.03)),),
+                         hand_start=(0.9, 0.0, 1.0))
+    world = World(layout=layout)
+    tracer = world.tracer()
+    for tick in range(TICKS):
+        world.set_q(world.q + 0.05 * tick)
+        world.set_hand((0.9 - 0.02 * tick, 0.0, 1.0))
+        tracer.capture()
+    # Two ticks more than the trace: the recording poses the bodies over the shorter of the two.
+    rollout = Rollout(dt=DT, time=np.arange(TICKS + 2) * DT, metrics={}, scene=tracer.finish())
+    path = record(tmp_path_factory.mktemp("scene"), domain, evaluation, rollout)
+    return path, SceneReplay(trace=rollout.scene), rollout
+
+
+def test_every_body_is_drawn_with_its_geoms(scene):
+    path, replay, _ = scene
+    entities = recorded_entities(path)
+    for body in {g.body for g in replay.geoms}:
+        assert entities[f"world/{body}/geoms"] == [], body
+        geoms = [g for g in replay.geoms if g.body == body]
+        kinds = Counter(g.kind for g in geoms)
+        shapes, _ = components(path, f"world/{body}/geoms")
+        assert len(shapes.get("Boxes3D:half_sizes", [])) == kinds["box"] + kinds["plane"]
+        assert len(shapes.get("Ellipsoids3D:half_sizes", [])) == kinds["sphere"] + kinds["ellipsoid"]
+        assert len(shapes.get("Cylinders3D:lengths", [])) == kinds["cylinder"]
+        assert ("Mesh3D:vertex_positions" in shapes) == (kinds["mesh"] > 0)
+        capsules = [g for g in geoms if g.kind == "capsule"]
+        assert len(shapes.get("Capsules3D:lengths", [])) == len(capsules)
+        for capsule, start, xyzw, length in zip(capsules, shapes.get("Capsules3D:translations", []),
+                                                shapes.get("Capsules3D:quaternions", []),
+                                                shapes.get("Capsules3D:lengths", [])):
+            middle = np.array(start) + _rotate(xyzw, [0.0, 0.0, length / 2])  # rerun's starts at one end
+            np.testing.assert_allclose(middle, capsule.pos, atol=1e-5)
+    assert views(path) == [("3D", "world"), ("TextDocument", "scenario"), ("TextLog", "/")]  # no series view
+
+
+def test_moving_bodies_follow_the_replayed_poses_and_still_ones_are_static(scene):
+    path, replay, _ = scene
+    poses = [replay.poses(tick) for tick in range(TICKS)]
+    moving = 0
+    for i, body in enumerate(replay.bodies):
+        static, rows = components(path, f"world/{body}")
+        positions = np.array([p[i] for p, _ in poses])
+        quaternions = np.array([q[i][[1, 2, 3, 0]] for _, q in poses])  # wxyz -> xyzw
+        if np.ptp(positions, axis=0).max() > 1e-9 or np.ptp(quaternions, axis=0).max() > 1e-9:
+            moving += 1
+            assert len(rows) == TICKS, body
+            np.testing.assert_allclose([r["Transform3D:translation"][0] for r in rows], positions, atol=1e-6)
+            np.testing.assert_allclose([r["Transform3D:quaternion"][0] for r in rows], quaternions, atol=1e-6)
+            assert {r["Transform3D:parent_frame"][0] for r in rows} == {WORLD_FRAME}
+        else:
+            assert rows == [], f"{body} never moves and should be static"
+            np.testing.assert_allclose(static["Transform3D:translation"][0], positions[0], atol=1e-6)
+            assert static["Transform3D:parent_frame"] == [WORLD_FRAME]
+    assert moving >= 2  # the arm's links and the hand
+
+
+def test_a_scene_that_no_longer_compiles_is_left_out_with_a_warning(tmp_path, domain, evaluation, scene):
+    _, _, rollout = scene
+    broken = replace(rollout.scene, qpos=rollout.scene.qpos[:, :-1])  # as if the arm file changed since
+    path = record(tmp_path, domain, evaluation, replace(rollout, scene=broken))
+    assert not any(e.startswith("world") for e in recorded_entities(path))
+    static, [verdict] = components(path, "events")
+    assert static["TextLog:text"][0].startswith("scene not drawn: The scene trace holds")
+    assert verdict["TextLog:text"][0].startswith("episode ends")
+    assert ("3D", "world") not in views(path)
 
 
 def _rotate(xyzw, v) -> np.ndarray:  # noqa: ANN001
@@ -94,39 +261,3 @@ def _rotate(xyzw, v) -> np.ndarray:  # noqa: ANN001
     q = np.array([x, y, z])
     v = np.asarray(v, dtype=float)
     return v + 2 * np.cross(q, np.cross(q, v) + w * v)
-
-
-def test_collaboration_recording_has_the_hand_states_and_both_grids(tmp_path):
-    path, rollout, _ = record(tmp_path, "collab.yaml", COLLAB_THETA, seed=542567736)
-    entities = recorded_entities(path)
-    end = float(rollout.time[-1])
-    assert len(entities["world/human/hand"]) == len(rollout.time)
-    assert entities["world/human/hand"][-1] == pytest.approx(end)
-    assert "world/human/hand_path" in entities
-    for agent in ("human", "robot"):
-        states = rollout.states[agent]
-        changes = 1 + sum(a != b for a, b in zip(states, states[1:]))
-        assert len(entities[f"states/{agent}"]) == changes  # logged on change only
-        assert f"occupancy/{agent}" in entities
-    assert {f"belief/goal{i}" for i in range(3)} <= set(entities)
-    assert len(entities["events"]) == len(rollout.events) + 1  # and the verdict at the end
-
-
-def test_occupancy_image_puts_x_right_and_y_up():
-    grid = np.zeros((32, 32))
-    grid[31, 0] = 1.0  # high x, low y
-    image = occupancy_image(grid)
-    assert image.dtype == np.uint8 and image.shape == (32, 32)
-    assert image[31, 31] == 255  # bottom row (low y), right column (high x)
-
-
-def test_an_unwritable_recording_path_is_a_clear_error(tmp_path, teleop):
-    _, rollout, _ = teleop
-    (tmp_path / "file").write_text("not a folder")
-    domain = compile_spec(load_spec(SPECS / "teleop.yaml"))
-    evaluation, _ = evaluate_with_rollout(domain, np.array(TELEOP_THETA), seed=0)
-    with pytest.raises(RecordingError, match="cannot write the recording"):
-        write_recording(tmp_path / "file" / "x.rrd", domain=domain, evaluation=evaluation, rollout=rollout,
-                        recording_id="x")
-    with pytest.raises(RecordingError, match="is a folder"):
-        write_recording(tmp_path, domain=domain, evaluation=evaluation, rollout=rollout, recording_id="x")

@@ -45,7 +45,7 @@ def test_a_stored_failure_replays_to_its_stored_outcome(run):
     assert f"evaluation {fid} as stored in evaluations.jsonl" in result.output
     path = run / "recordings" / f"{fid}.rrd"
     assert path.is_file()
-    assert "world/goals" in recorded_entities(path)
+    assert "world/robot/path" in recorded_entities(path)  # the toy task's one trajectory
 
     replayed = replay_failure(run, fid)
     assert replayed.matches and [c.name for c in replayed.checks] == [
@@ -115,4 +115,4 @@ def test_any_scenario_of_a_spec_replays_deterministically(tmp_path):
     assert result.exit_code == 0, result.output
     assert "a first simulation of the same theta and seed" in result.output
     entities = recorded_entities(out)
-    assert {"world/robot/links", "belief/goal0", "world/table"} <= set(entities)
+    assert {"world/arm/link3", "series/belief/goal0", "world/robot/ee", "world/object/goal0"} <= set(entities)
