@@ -61,12 +61,12 @@ def main() -> None:
     domain = compile_spec(load_spec(args.spec))
     device = pick_device(args.device)
     rng = np.random.default_rng(0)
-    n, agents = domain.space.dim, len(domain.task_cls.agents)
-    surrogate = Surrogate(bounds=(domain.space.lower, domain.space.upper), agents=agents,
+    n, channels = domain.space.dim, len(domain.grids)
+    surrogate = Surrogate(bounds=(domain.space.lower, domain.space.upper), channels=channels,
                           outputs=1 + len(domain.measures), epochs=2, batch_size=64, learning_rate=1e-4, device=device,
                           seed=0)
     theta = rng.uniform(domain.space.lower, domain.space.upper, size=(256, n)).astype(np.float32)
-    grids = rng.dirichlet(np.ones(1024), size=(256, agents)).reshape(256, agents, 32, 32).astype(np.float32)
+    grids = rng.dirichlet(np.ones(1024), size=(256, channels)).reshape(256, channels, 32, 32).astype(np.float32)
     surrogate.fit(theta, grids, rng.random((256, 1 + len(domain.measures))).astype(np.float32))
     exploit(domain, Timed(domain, surrogate), gradients=True, iterations=3, seed=0)  # JIT and warm-up
 

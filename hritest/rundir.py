@@ -6,6 +6,7 @@ Layout of ``runs/<spec>-<timestamp>/``::
     run.json           spec digest and origin, algorithm, seed, budget, versions
     evaluations.jsonl  every finished evaluation, one JSON object a line, append-only
     occupancy.f32      its occupancy grids, fixed-size float32 records in the same order
+                       (empty when the task declares no grids: records of size zero)
     checkpoint.pkl     the search's state at the last step (archives, scheduler, pending batch)
     progress.csv       evaluations, wall time, QD-score, coverage, best, failures
     archive.csv        the result archive's elites
@@ -175,8 +176,15 @@ class RunDirectory:
         return records
 
     def occupancy(self, shape: tuple[int, ...]) -> np.ndarray:
-        """``(evaluations, *shape)`` occupancy grids of the committed evaluations."""
+        """``(evaluations, *shape)`` occupancy grids of the evaluations whose records are written.
+
+        With grids that is every committed evaluation, and maybe one more whose line is not yet
+        written; callers keep as many rows as they read lines. Zero-size records (a task without
+        grids) leave no trace in the file, so their number is that of the committed evaluations.
+        """
         size = int(np.prod(shape))
+        if size == 0:
+            return np.zeros((len(self.evaluations()), *shape), np.float32)
         path = self.path / "occupancy.f32"
         data = np.fromfile(path, dtype=np.float32) if path.exists() else np.zeros(0, np.float32)
         count = len(data) // size

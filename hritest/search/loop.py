@@ -80,7 +80,9 @@ class Search:
     def __init__(self, *, domain: Domain, run: RunDirectory, state: dict) -> None:
         self.domain, self.run_dir, self.state = domain, run, state
         self.records: dict[int, dict] = {r["index"]: r for r in run.evaluations()}
-        self.occupancy_shape = (len(domain.task_cls.agents), 32, 32)
+        # One record per evaluation: the declared grids stacked (compile_spec admits only 32x32
+        # ones); of size zero for a task without grids.
+        self.occupancy_shape = (len(domain.grids), 32, 32)
         self.summarised = -math.inf
 
     @classmethod

@@ -71,7 +71,7 @@ class SurrogateAssisted:
         self.initial = settings.initial_evaluations
         self.rng = np.random.default_rng(seed)
         self.surrogate = Surrogate(bounds=(domain.space.lower, domain.space.upper),
-                                   agents=len(domain.task_cls.agents), outputs=1 + len(domain.measures),
+                                   channels=len(domain.grids), outputs=1 + len(domain.measures),
                                    epochs=settings.epochs, batch_size=settings.batch_size,
                                    learning_rate=settings.learning_rate, device=pick_device(options.device),
                                    seed=seed)

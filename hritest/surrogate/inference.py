@@ -14,7 +14,9 @@ equivalent form that costs less:
   use oneDNN's fast kernels; transposed ones fall back to a much slower path on the CPU;
 * images are kept in channels-last order, which oneDNN prefers.
 
-The result is differentiable like the original, so DSAS takes its Jacobians through it too.
+For a task without grids there is no occupancy network; the predictor's folded theta branch and
+head are the whole surrogate. The result is differentiable like the original, so DSAS takes its
+Jacobians through it too.
 Outputs equal the eager networks' to float32 rounding (``tests/surrogate``).
 """
 
@@ -125,33 +127,36 @@ def _fold_sequential(layers: nn.Sequential) -> nn.Sequential:
 
 class FastPredict(nn.Module):
     """:class:`PredictNet` in eval mode with its batch norms folded, and ``output * scale + shift``
-    folded into its last layer."""
+    folded into its last layer. Without a grid branch (no grids), ``grid`` is None, as in the net."""
 
     def __init__(self, net: PredictNet, *, scale: torch.Tensor, shift: torch.Tensor) -> None:
         super().__init__()
-        self.theta, self.grid, self.head = (_fold_sequential(s) for s in (net.theta, net.grid, net.head))
+        self.theta, self.head = _fold_sequential(net.theta), _fold_sequential(net.head)
+        self.grid = None if net.grid is None else _fold_sequential(net.grid)
         last = self.head[-1] = copy.deepcopy(self.head[-1])
         with torch.no_grad():
             last.weight.mul_(scale[:, None])
             last.bias.mul_(scale).add_(shift)
 
-    def forward(self, theta: torch.Tensor, occupancy: torch.Tensor) -> torch.Tensor:
-        return self.head(torch.cat([self.theta(theta), self.grid(occupancy)], dim=1))
+    forward = PredictNet.forward  # the same wiring, on the folded layers
 
 
 class FastSurrogate(nn.Module):
     """``theta -> predictor(theta, occupancy(theta)) * scale + shift`` of a trained surrogate's two
-    networks, refolded. A snapshot: build a new one after training."""
+    networks, refolded; ``theta -> predictor(theta, None) * scale + shift`` for a task without grids
+    (``occupancy`` None). A snapshot: build a new one after training."""
 
-    def __init__(self, occupancy: OccupancyNet, predictor: PredictNet, *, scale: torch.Tensor,
+    def __init__(self, occupancy: OccupancyNet | None, predictor: PredictNet, *, scale: torch.Tensor,
                  shift: torch.Tensor) -> None:
         super().__init__()
-        if occupancy.training or predictor.training:
+        if (occupancy is None) != (predictor.grid is None):
+            raise ValueError("the predictor has a grid branch exactly when there is an occupancy network")
+        if predictor.training or (occupancy is not None and occupancy.training):
             raise ValueError("refold the networks in eval mode: batch norm folds only with fixed statistics")
-        self.occupancy = FastOccupancy(occupancy)
+        self.occupancy = None if occupancy is None else FastOccupancy(occupancy)
         self.predictor = FastPredict(predictor, scale=scale, shift=shift)
         self.outputs = predictor.head[-1].out_features
         self.requires_grad_(False)
 
     def forward(self, theta: torch.Tensor) -> torch.Tensor:
-        return self.predictor(theta, self.occupancy(theta))
+        return self.predictor(theta, None if self.occupancy is None else self.occupancy(theta))

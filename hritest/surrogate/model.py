@@ -5,6 +5,8 @@ state) kept between iterations, the occupancy network first (KL divergence to th
 grids), then the predictor for the same number of epochs with the occupancy network frozen and
 fed its *predicted* grids, so that at exploitation time it sees what it was trained on.
 Targets are the regularised objective divided by the objective's range, and the raw measures.
+A task that declares no grids has no occupancy network: the predictor alone learns the targets
+from theta, and a fit's ``occupancy_loss`` is NaN (no such loss, as for a fit of no epochs).
 
 Two departures from the reference, each the cause of a surrogate that was no better than a
 constant on the teleoperation spec (``benchmarks/README.md``, "Search quality"):
@@ -51,7 +53,8 @@ def pick_device(name: str) -> torch.device:
 
 @dataclass(frozen=True)
 class Fit:
-    """The last epoch's mean losses of one training round."""
+    """The last epoch's mean losses of one training round; NaN for a loss with nothing to train
+    (``occupancy_loss`` of a surrogate without grids, either loss of a fit of zero epochs)."""
 
     occupancy_loss: float
     predictor_loss: float
@@ -63,21 +66,23 @@ class Surrogate:
 
     Args:
         bounds: theta's lower and upper bounds; predictions are made for theta clipped into them.
-        agents: occupancy channels. outputs: 1 + number of measures.
+        channels: the task's grid count, ``len(domain.grids)``; 0: no occupancy network, the
+            predictor learns from theta alone. outputs: 1 + number of measures.
     """
 
-    def __init__(self, *, bounds: tuple[np.ndarray, np.ndarray], agents: int, outputs: int, epochs: int,
+    def __init__(self, *, bounds: tuple[np.ndarray, np.ndarray], channels: int, outputs: int, epochs: int,
                  batch_size: int, learning_rate: float, device: torch.device, seed: int) -> None:
         torch.manual_seed(seed + 42)
         self.device = device
         self.lower, self.upper = (torch.as_tensor(np.asarray(b), dtype=torch.float32, device=device) for b in bounds)
         inputs = len(self.lower)
         # In eval mode except while fit() trains them: predictions never update batch-norm statistics.
-        self.occupancy = OccupancyNet(inputs=inputs, agents=agents).to(device).eval()
-        self.predictor = PredictNet(inputs=inputs, agents=agents, outputs=outputs).to(device).eval()
+        self.occupancy = OccupancyNet(inputs=inputs, channels=channels).to(device).eval() if channels else None
+        self.predictor = PredictNet(inputs=inputs, channels=channels, outputs=outputs).to(device).eval()
         # fused: one kernel over all parameters per step instead of a dozen small ops per tensor; the
         # same update to float rounding, and ~1 ms less of each ~15-25 ms training step on 2 CPU cores.
-        self.occupancy_optimizer = torch.optim.AdamW(self.occupancy.parameters(), lr=learning_rate, fused=True)
+        self.occupancy_optimizer = None if self.occupancy is None else torch.optim.AdamW(
+            self.occupancy.parameters(), lr=learning_rate, fused=True)
         self.predictor_optimizer = torch.optim.AdamW(self.predictor.parameters(), lr=learning_rate, fused=True)
         self.epochs, self.batch_size, self.seed = epochs, batch_size, seed
         self.rounds = 0
@@ -85,29 +90,35 @@ class Surrogate:
         self.target_mean = torch.zeros(outputs, device=device)
         self.target_std = torch.ones(outputs, device=device)
 
-    def fit(self, theta: np.ndarray, occupancy: np.ndarray, targets: np.ndarray) -> Fit:
-        """One round of training on every sample so far (batches of ``batch_size``, last partial dropped)."""
+    def fit(self, theta: np.ndarray, occupancy: np.ndarray | None, targets: np.ndarray) -> Fit:
+        """One round of training on every sample so far (batches of ``batch_size``, last partial dropped).
+
+        ``occupancy`` is ``(samples, channels, 32, 32)``; without grids it is not read (None, or
+        the ``(samples, 0, 32, 32)`` array a run directory gives).
+        """
         generator = torch.Generator().manual_seed(self.seed + 420 + self.rounds)
         self.rounds += 1
         x = self.clip(torch.as_tensor(theta, dtype=torch.float32, device=self.device))
-        grids = torch.as_tensor(occupancy, dtype=torch.float32, device=self.device)
         y = torch.as_tensor(targets, dtype=torch.float32, device=self.device)
         self.target_mean = y.mean(dim=0)
         std = y.std(dim=0) if len(y) > 1 else torch.ones_like(self.target_mean)
         self.target_std = torch.where(std > 1e-8, std, torch.ones_like(std))  # a constant target: any scale
         y = (y - self.target_mean) / self.target_std
         batch = min(self.batch_size, len(x))  # the paper's first round has 100 samples
-        kl = nn.KLDivLoss(reduction="batchmean")
 
-        self.occupancy.train()
-        occupancy_loss = self._epochs(generator, len(x), batch, self.occupancy_optimizer,
-                                      lambda i: kl(self.occupancy(x[i]), grids[i]))
-        self.occupancy.eval()
+        occupancy_loss, predicted = math.nan, None
+        if self.occupancy is not None:
+            kl = nn.KLDivLoss(reduction="batchmean")
+            grids = torch.as_tensor(occupancy, dtype=torch.float32, device=self.device)
+            self.occupancy.train()
+            occupancy_loss = self._epochs(generator, len(x), batch, self.occupancy_optimizer,
+                                          lambda i: kl(self.occupancy(x[i]), grids[i]))
+            self.occupancy.eval()
+            with torch.no_grad():
+                predicted = self.occupancy(x)
         self.predictor.train()
-        with torch.no_grad():
-            predicted = self.occupancy(x)
         predictor_loss = self._epochs(generator, len(x), batch, self.predictor_optimizer,
-                                      lambda i: nn.functional.mse_loss(self.predictor(x[i], predicted[i]), y[i]))
+                                      lambda i: nn.functional.mse_loss(self.predictor(x[i], _rows(predicted, i)), y[i]))
         self.predictor.eval()
         return Fit(occupancy_loss, predictor_loss, len(x))
 
@@ -133,7 +144,8 @@ class Surrogate:
     def __call__(self, theta: torch.Tensor) -> torch.Tensor:
         """Predictions ``(batch, outputs)`` for ``theta`` (a tensor on :attr:`device`), in eval mode."""
         x = self.clip(theta)
-        return self.predictor(x, self.occupancy(x)) * self.target_std + self.target_mean
+        grids = None if self.occupancy is None else self.occupancy(x)
+        return self.predictor(x, grids) * self.target_std + self.target_mean
 
     def refolded(self) -> FastSurrogate:
         """The networks as trained now, rewritten for fast prediction (:mod:`hritest.surrogate.inference`);
@@ -144,3 +156,8 @@ class Surrogate:
         with torch.inference_mode():
             x = torch.as_tensor(np.asarray(theta), dtype=torch.float32, device=self.device)
             return self(x).double().cpu().numpy()
+
+
+def _rows(grids: torch.Tensor | None, index: torch.Tensor) -> torch.Tensor | None:
+    """``grids[index]``, or None for a surrogate without grids."""
+    return None if grids is None else grids[index]

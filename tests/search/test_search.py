@@ -193,3 +193,32 @@ def test_the_command_line_search_ends_with_a_report_and_exit_1_for_failures(toy_
     assert result.exit_code == 1 and isinstance(result.exception, SystemExit), result.output
     assert "failures" in result.output and (tmp_path / "run" / "report" / "index.html").is_file()
     assert f"report: {tmp_path / 'run' / 'report' / 'index.html'}" in result.output
+
+
+@pytest.mark.parametrize("algorithm", ["sas", "dsas"])
+def test_sas_and_dsas_search_a_task_without_grids_and_resume(toy_spec, tmp_path, algorithm):
+    """The toy task declares no occupancy grids: the surrogate learns from theta alone."""
+    spec = toy_spec("budget: 500", "budget: 500\n  surrogate: {initial_evaluations: 30, inner_iterations: 20, "
+                                   "epochs: 5, batch_size: 16}")
+    found = qd.start(spec_file=spec, out=tmp_path / "run", algorithm=algorithm, budget=60, seed=0, backend=TWO,
+                     surrogate=qd.SurrogateOptions(device="cpu"))
+    assert found.domain.grids == {}
+    proposer = found.state["proposer"]
+    assert proposer.surrogate.occupancy is None and proposer.outer >= 2
+    assert all(np.isnan(f["occupancy_loss"]) and np.isfinite(f["predictor_loss"]) for f in proposer.fits)
+    assert np.isfinite(proposer.accuracy(found.domain)["objective_mae"])
+    assert (tmp_path / "run" / "occupancy.f32").stat().st_size == 0
+
+    run = RunDirectory.open(tmp_path / "run")
+    state = run.load_checkpoint()
+    state["budget"] = 80
+    run.save_checkpoint(state)
+    again = qd.resume(run_path=tmp_path / "run", backend=TWO)
+    assert again.state["evaluations"] == 80
+    assert sorted(r["index"] for r in RunDirectory.open(tmp_path / "run").evaluations()) == list(range(80))
+    assert again.state["proposer"].outer > proposer.outer
+
+    from hritest.report import load_run, write_report
+
+    assert np.isnan(load_run(tmp_path / "run").surrogate["fits"][0]["occupancy_loss"])  # surrogate.json
+    assert write_report(tmp_path / "run", recordings=0).is_file()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -23,21 +24,21 @@ CPU = torch.device("cpu")
 
 
 def surrogate_for(domain, *, epochs=5, seed=0) -> Surrogate:
-    return Surrogate(bounds=(domain.space.lower, domain.space.upper), agents=len(domain.task_cls.agents),
+    return Surrogate(bounds=(domain.space.lower, domain.space.upper), channels=len(domain.grids),
                      outputs=1 + len(domain.measures), epochs=epochs, batch_size=16, learning_rate=1e-3, device=CPU,
                      seed=seed)
 
 
-@pytest.mark.parametrize(("spec", "inputs", "agents", "outputs"),
+@pytest.mark.parametrize(("spec", "inputs", "channels", "outputs"),
                          [("teleop", 9, 1, 3), ("collab", 6, 2, 3), ("collab_human", 8, 2, 3), ("collab_wait", 6, 2, 3)])
-def test_shapes_follow_the_spec(spec, inputs, agents, outputs):
+def test_shapes_follow_the_spec(spec, inputs, channels, outputs):
     domain = compile_spec(load_spec(SPECS / f"{spec}.yaml"))
-    assert (domain.space.dim, len(domain.task_cls.agents), 1 + len(domain.measures)) == (inputs, agents, outputs)
-    occupancy = OccupancyNet(inputs=inputs, agents=agents).eval()
-    predictor = PredictNet(inputs=inputs, agents=agents, outputs=outputs).eval()
+    assert (domain.space.dim, len(domain.grids), 1 + len(domain.measures)) == (inputs, channels, outputs)
+    occupancy = OccupancyNet(inputs=inputs, channels=channels).eval()
+    predictor = PredictNet(inputs=inputs, channels=channels, outputs=outputs).eval()
     grids = occupancy(torch.randn(5, inputs))
-    assert grids.shape == (5, agents, 32, 32)
-    torch.testing.assert_close(grids.exp().sum(dim=(2, 3)), torch.ones(5, agents))
+    assert grids.shape == (5, channels, 32, 32)
+    torch.testing.assert_close(grids.exp().sum(dim=(2, 3)), torch.ones(5, channels))
     assert predictor(torch.randn(5, inputs), grids).shape == (5, outputs)
 
 
@@ -63,6 +64,43 @@ def test_training_lowers_the_loss_on_real_data(teleop_data):
     assert last.occupancy_loss < first.occupancy_loss
     assert last.predictor_loss < first.predictor_loss
     assert np.isfinite(model.predict(theta)).all()
+
+
+def theta_only_data(n: int = 96) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray, np.ndarray]:
+    """Bounds, theta and targets that are a smooth function of theta alone: what a task without
+    occupancy grids gives the surrogate."""
+    rng = np.random.default_rng(1)
+    lower, upper = np.array([-1.0, -1.0, 0.0, 0.5]), np.array([1.0, 1.0, 0.2, 1.5])
+    theta = rng.uniform(lower, upper, size=(n, 4)).astype(np.float32)
+    x0, x1, x2, x3 = theta.T
+    targets = np.stack([np.sin(2 * x0) + x1**2, 5 * x2 * x3, x0 - x3], axis=1).astype(np.float32)
+    return (lower, upper), theta, targets
+
+
+def theta_only_surrogate(bounds, *, epochs: int) -> Surrogate:
+    return Surrogate(bounds=bounds, channels=0, outputs=3, epochs=epochs, batch_size=16, learning_rate=1e-3,
+                     device=CPU, seed=0)
+
+
+def test_without_grids_the_predictor_alone_learns_the_targets_from_theta():
+    bounds, theta, targets = theta_only_data()
+    model = theta_only_surrogate(bounds, epochs=1)
+    assert model.occupancy is None and model.predictor.grid is None
+    first = model.fit(theta, None, targets)
+    for _ in range(30):
+        last = model.fit(theta, None, targets)
+    assert math.isnan(first.occupancy_loss) and math.isnan(last.occupancy_loss)  # no such loss
+    assert last.predictor_loss < 0.5 * first.predictor_loss
+    error = np.abs(model.predict(theta) - targets).mean(axis=0)
+    assert np.all(error < 0.5 * targets.std(axis=0))  # well better than predicting the mean
+
+
+def test_without_grids_the_run_directorys_empty_grids_are_the_same_as_none():
+    bounds, theta, targets = theta_only_data(40)
+    given_none, given_empty = theta_only_surrogate(bounds, epochs=2), theta_only_surrogate(bounds, epochs=2)
+    given_none.fit(theta, None, targets)
+    given_empty.fit(theta, np.zeros((len(theta), 0, 32, 32), np.float32), targets)  # as Search.dataset gives
+    np.testing.assert_array_equal(given_none.predict(theta), given_empty.predict(theta))
 
 
 def test_the_batched_jacobian_equals_autograd_on_single_inputs(teleop_data):
