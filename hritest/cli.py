@@ -9,6 +9,7 @@ from typing import Annotated
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 import hritest
@@ -74,6 +75,49 @@ def validate(specs: Annotated[list[Path], typer.Argument(help="one or more spec 
             out.print(f"[green]ok[/green] {path}", highlight=False)
     if bad:
         raise typer.Exit(EXIT_INPUT)
+
+
+@command
+def check(
+    spec: SpecArg,
+    scenarios: Annotated[int, typer.Option(min=0, help="random scenarios to try besides the nominal one")] = 3,
+    seed: Annotated[int, typer.Option(help="seed of the scenarios tried")] = 0,
+) -> None:
+    """Try a spec and its plugins before a search: exit 0 when ready, 2 with what to fix.
+
+    Compiles the spec, runs the nominal scenario (twice, for determinism) and a few random ones,
+    checks each rollout against the plugin contract, and says what one scenario costs.
+    """
+    from hritest.check import check_spec
+    from hritest.errors import SpecError
+
+    try:
+        report = check_spec(spec, scenarios=scenarios, seed=seed)
+    except SpecError as exc:
+        err.print(f"[red]x[/red] {spec} does not compile:", highlight=False)
+        err.print(str(exc), markup=False, highlight=False)
+        raise typer.Exit(EXIT_INPUT) from None
+    for line in report.passed:
+        out.print(f"[green]ok[/green] {escape(line)}", highlight=False)
+    for note in report.notes:
+        out.print(f"[yellow]note[/yellow] {escape(note)}", highlight=False)
+    per = report.seconds_per_scenario
+    out.print(f"one scenario takes {_duration(per)} (median of {len(report.seconds)}); the spec's budget of "
+              f"{report.budget} evaluations is about {_duration(per * report.budget)} of simulation on one worker",
+              highlight=False)
+    for finding in report.findings:
+        err.print(f"[red]x[/red] {escape(str(finding))}", highlight=False)
+    if not report.ok:
+        err.print(f"{len(report.findings)} finding(s): fix them before a search.", highlight=False)
+        raise typer.Exit(EXIT_INPUT)
+    out.print(f"{spec}: ready to search.", highlight=False)
+
+
+def _duration(seconds: float) -> str:
+    for unit, size in (("h", 3600.0), ("min", 60.0), ("s", 1.0)):
+        if seconds >= size:
+            return f"{seconds / size:.3g} {unit}"
+    return f"{seconds * 1000:.3g} ms"
 
 
 @command
@@ -455,6 +499,23 @@ def promote(
         for path, before in hc.mark_fixed(folder, [i for ids in mark_fixed for i in ids.split(",") if i]):
             note = "was already fixed" if before == "fixed" else "open -> fixed"
             out.print(f"fixed {path}  ({note})", highlight=False)
+
+
+@command
+def new(
+    name: Annotated[str, typer.Argument(help="the domain's name: letters, digits and '_', starting with a letter",
+                                        show_default=False)],
+    folder: Annotated[Path, typer.Option("--dir", help="where to write NAME.yaml and NAME_plugins.py")] = Path("."),
+) -> None:
+    """Start a domain: write NAME.yaml and NAME_plugins.py, a minimal spec and plugins that work as written.
+
+    Never overwrites: exit 2 if either file exists, or if NAME is not a valid name.
+    """
+    from hritest.scaffold import write_domain
+
+    spec, plugins = write_domain(name, folder=folder)
+    out.print(f"wrote {spec} and {plugins}", highlight=False)
+    out.print(f"next: hritest check {spec}, then hritest search {spec} --budget 200", highlight=False)
 
 
 if __name__ == "__main__":
