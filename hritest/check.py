@@ -8,7 +8,7 @@ that says what to change. It also says what one scenario costs, so a budget can 
 from __future__ import annotations
 
 import statistics
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -64,12 +64,19 @@ class _Checker:
         evaluation, rollout = evaluate_with_rollout(self.domain, theta, seed=seed)
         self.seconds.append(evaluation.seconds)
         if not evaluation.ok:
-            self.findings.append(Finding(check=evaluation.status, scenario=label, message=_fix(evaluation)))
+            self.find(evaluation.status, label, _fix(evaluation))
         elif rollout is not None:
             for problem in contract.nonfinite_metrics(rollout):
-                self.findings.append(Finding(check="metrics", scenario=label, message=(
-                    f"{problem}; a search survives it, but an expression that reads it will fail")))
+                self.find("metrics", label, f"{problem}; a search survives it, but an expression that reads it will fail")
         return evaluation, rollout
+
+    def find(self, check: str, label: str, message: str) -> None:
+        """Adds a finding; one that repeats an earlier one only adds its scenario to it."""
+        for i, seen in enumerate(self.findings):
+            if (seen.check, seen.message) == (check, message):
+                self.findings[i] = replace(seen, scenario=f"{seen.scenario}, {label}")
+                return
+        self.findings.append(Finding(check=check, scenario=label, message=message))
 
 
 def check_spec(path: Path, *, scenarios: int = 3, seed: int = 0) -> CheckReport:
@@ -89,10 +96,10 @@ def check_spec(path: Path, *, scenarios: int = 3, seed: int = 0) -> CheckReport:
                               f"failure {nominal.failure}, metrics {_short(nominal.metrics)}")
         again, _ = checker.scenario("nominal scenario, again", domain.nominal, seed)
         if _outcome(again) != _outcome(nominal):
-            checker.findings.append(Finding(check="determinism", scenario="nominal scenario", message=(
+            checker.find("determinism", "nominal scenario", (
                 f"the same theta and seed gave {_outcome(nominal)} and then {_outcome(again)}; draw every random "
                 "number from the rng each plugin is given (never np.random or random directly) and keep no "
-                "state between episodes")))
+                "state between episodes"))
         elif again.ok:
             checker.passed.append("same seed, same outcome")
     rng = np.random.default_rng(seed)

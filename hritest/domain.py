@@ -310,7 +310,10 @@ def _check_world(spec: Spec, world: WorldLayout, scenario: Scenario, source) -> 
     try:
         built = World(layout=placed)
     except HritestError as exc:
-        raise source.error(("world",) if spec.world is not None else ("workspace",), str(exc)) from None
+        binding = [i for i, p in enumerate(spec.parameters)
+                   if getattr(exc, "body", None) is not None and p.bind.split(".")[0] == exc.body]
+        where = ("parameters", binding[0], "bind") if binding else ("world",) if spec.world else ("workspace",)
+        raise source.error(where, str(exc)) from None
     joints = len(built.joint_names) if world.arm is not None else 0
     for i, p in enumerate(spec.parameters):
         if p.bind == f"{ARM_TARGET}.start" and p.size != joints:

@@ -92,7 +92,7 @@ def _score(domain: Domain, scenario: Scenario, rollout: Rollout, base: dict) -> 
     broken = contract.rollout_problems(domain.task_cls, rollout)
     if broken:
         return Evaluation(**base, status="plugin_error",
-                          message=f"task plugin {domain.task_cls.__qualname__} broke the contract: " + "; ".join(broken))
+                          message="the task plugin broke the contract: " + "; ".join(broken))
     missing = contract.missing_metrics(domain.task_cls, rollout)
     if missing:
         return Evaluation(**base, status="metric_error", message="; ".join(missing))

@@ -31,10 +31,10 @@ def test_a_ready_spec_passes(toy_spec):
 @pytest.mark.parametrize(("old", "new", "check", "words"), [
     # A declared metric never reported.
     ('"human_variation": variation}', "}", "metric_error",
-     ["declares metric 'human_variation' but its Rollout.metrics lacks it"]),
+     ["ToyTask (", "toy_plugins.py:", "declares metric 'human_variation' but its Rollout.metrics lacks it"]),
     # A grid of the wrong shape.
     ("grids: ClassVar[dict[str, tuple[int, int]]] = {}", 'grids = {"robot": (32, 32)}', "plugin_error",
-     ["declares grids ['robot'] but returned []"]),
+     ["toy_plugins.py:", "declares grids ['robot'] but returned []"]),
     # Randomness from outside the given rng.
     ("distance = float(np.linalg.norm(g0 - g1))", "distance = float(np.linalg.norm(g0 - g1)) + np.random.rand()",
      "determinism", ["draw every random number from the rng"]),
@@ -59,6 +59,12 @@ def test_grid_shapes_are_checked_per_grid(toy_spec, tmp_path):
                                                    'grids = {"robot": (32, 32)}'))
     report = check_spec(spec)
     assert any("grid 'robot' has shape (16, 16), declared (32, 32)" in f.message for f in report.findings)
+
+
+def test_a_finding_of_every_scenario_is_printed_once_with_all_of_them(toy_spec, tmp_path):
+    report = check_spec(broken_toy(toy_spec, tmp_path, '"human_variation": variation}', "}"), scenarios=2)
+    assert len(report.findings) == 1
+    assert report.findings[0].scenario == "nominal scenario, random scenario 1, random scenario 2"
 
 
 def test_findings_exit_2_and_a_spec_that_does_not_compile_too(toy_spec, tmp_path):

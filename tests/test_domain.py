@@ -150,4 +150,5 @@ def test_an_unknown_body_of_the_world_model_is_named_with_the_known_ones(toy_spe
                     "  - {name: window_x, bind: window.x, bounds: [0.5, 1.5]}\n")
     with pytest.raises(SpecError) as caught:
         compile_spec(load_spec(spec))
-    assert "world" in str(caught.value) and "window" in str(caught.value) and "door" in str(caught.value)
+    text = str(caught.value)
+    assert "parameters[0].bind:" in text and "no body named 'window'" in text and "door" in text

@@ -50,7 +50,12 @@ _KINDS = {
 
 
 class WorldModelError(HritestError):
-    """A scene or arm MJCF that cannot be loaded or merged, or a layout naming a body it lacks."""
+    """A scene or arm MJCF that cannot be loaded or merged, or a layout naming a body it lacks
+    (then ``body`` names it, so a caller can point at whatever asked for it)."""
+
+    def __init__(self, message: str, *, body: str | None = None):
+        super().__init__(message)
+        self.body = body
 
 
 class ArmModelError(WorldModelError):
@@ -318,7 +323,7 @@ class World:
                 if layout.model
                 else f"a parameter moves a body named {name!r}, but the world has no model file (world.model)."
             )
-            raise WorldModelError(f"{where} Fix the parameter that binds {name}.x|y|z|yaw in the spec.")
+            raise WorldModelError(f"{where} Fix the parameter that binds {name}.x|y|z|yaw in the spec.", body=name)
         return body
 
 
