@@ -54,9 +54,10 @@ _PLANE_HALF = 5.0  # m: MuJoCo draws a plane of size 0 without end; a recording 
 _PLANE_THICKNESS = 0.002  # m: a plane is drawn as a thin box whose top face is the plane
 _CAMERA = np.array([0.8, -0.7, 0.55])  # eye offset per metre of the scene's diagonal: a +x, -y, +z corner
 _MIN_EXTENT = 0.5  # m: the camera keeps this far back from a scene of one point
-_POINT_RADIUS = 0.015
-_PATH_RADIUS = 0.003
-_COLOURS = ((230, 60, 50), (230, 175, 140), (60, 140, 220), (90, 180, 90), (200, 80, 200), (230, 120, 30))
+# Trajectories are drawn in screen pixels, not metres: a scene may be a 30 cm table or a 20 m corridor.
+_POINT_PIXELS = 5.0
+_PATH_PIXELS = 1.5
+_COLOURS = ((230, 60, 50), (60, 140, 220), (90, 180, 90), (200, 80, 200), (230, 120, 30), (230, 175, 140))
 
 
 class RecordingError(HritestError):
@@ -334,9 +335,11 @@ def _log_trajectories(rec: Any, rollout: Any) -> None:
             continue
         entity, colour = _path("world", name), _COLOURS[i % len(_COLOURS)]
         rec.log(entity, rr.CoordinateFrame(WORLD_FRAME),
-                rr.Points3D.from_fields(radii=[_POINT_RADIUS], colors=[colour]), static=True)
+                rr.Points3D.from_fields(radii=rr.components.Radius.ui_points([_POINT_PIXELS]), colors=[colour]),
+                static=True)
         rec.log(f"{entity}/path", rr.CoordinateFrame(WORLD_FRAME),
-                rr.LineStrips3D([points], radii=[_PATH_RADIUS], colors=[colour]), static=True)
+                rr.LineStrips3D([points], radii=rr.components.Radius.ui_points([_PATH_PIXELS]), colors=[colour]),
+                static=True)
         time = rr.TimeColumn(TIMELINE, duration=np.asarray(rollout.time, dtype=float)[: len(points)])
         rec.send_columns(entity, indexes=[time], columns=rr.Points3D.columns(positions=points))
 
