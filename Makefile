@@ -19,6 +19,7 @@ $(BIN)/hritest: pyproject.toml
 demo: $(BIN)/hritest
 	$(BIN)/hritest validate specs/*.yaml
 	$(BIN)/hritest show specs/collab.yaml
+	$(BIN)/hritest check specs/collab.yaml
 	$(BIN)/hritest search specs/collab.yaml --algorithm dsas --budget 250 --inner-iterations 100 \
 		|| test $$? -eq 1
 
