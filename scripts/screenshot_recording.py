@@ -12,7 +12,9 @@ to start: --wait is how many seconds to give it.
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -47,7 +49,8 @@ def main() -> int:
         return 2
     web, grpc = free_port(), free_port()
     viewer = subprocess.Popen([args.rerun, str(args.recording), "--serve-web", "--web-viewer-port", str(web),
-                               "--port", str(grpc)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                               "--port", str(grpc)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                              start_new_session=True)  # .venv/bin/rerun is a wrapper: stop its whole group
     try:
         time.sleep(3)
         url = f"http://127.0.0.1:{web}/?url={quote(f'rerun+http://localhost:{grpc}/proxy', safe='')}"
@@ -61,7 +64,7 @@ def main() -> int:
             page.screenshot(path=str(args.out))
             chromium.close()
     finally:
-        viewer.terminate()
+        os.killpg(viewer.pid, signal.SIGTERM)
         viewer.wait()
     print(args.out)
     return 0
