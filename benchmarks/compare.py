@@ -83,21 +83,29 @@ def main() -> None:
             run = out / f"{algorithm}-s{seed}"
             if finished(run, args.evals):
                 print(f"{algorithm} seed {seed}: finished earlier in {run}, reused", flush=True)
-            elif resumable(run, algorithm=algorithm, evals=args.evals, seed=seed, inner_iterations=inner_iterations,
-                           spec=args.spec):
+            elif resumable(
+                run, algorithm=algorithm, evals=args.evals, seed=seed, inner_iterations=inner_iterations, spec=args.spec
+            ):
                 print(f"{algorithm} seed {seed}: stopped earlier in {run}, resumed", flush=True)
                 qd.resume(run_path=run, backend=qd.Backend(workers=args.workers))
             else:
                 if run.exists():  # a run of other settings, or one that never checkpointed
                     shutil.rmtree(run)
-                qd.start(spec_file=args.spec, out=run, algorithm=algorithm, budget=args.evals, seed=seed,
-                         backend=qd.Backend(workers=args.workers),
-                         surrogate=qd.SurrogateOptions(inner_iterations=args.inner_iterations, device=args.device))
+                qd.start(
+                    spec_file=args.spec,
+                    out=run,
+                    algorithm=algorithm,
+                    budget=args.evals,
+                    seed=seed,
+                    backend=qd.Backend(workers=args.workers),
+                    surrogate=qd.SurrogateOptions(inner_iterations=args.inner_iterations, device=args.device),
+                )
             row = final_row(run)
             row["total_seconds"] = row["wall_time"]
             results[algorithm].append(row)
-            print(f"{algorithm} seed {seed}: QD-score {row['qd_score']:,.1f} in {row['total_seconds']:.0f} s",
-                  flush=True)
+            print(
+                f"{algorithm} seed {seed}: QD-score {row['qd_score']:,.1f} in {row['total_seconds']:.0f} s", flush=True
+            )
 
     random_qd = statistics.fmean(r["qd_score"] for r in results["random"]) if "random" in results else None
     lines = [
@@ -114,7 +122,8 @@ def main() -> None:
         lines.append(
             f"| {algorithm} | {mean_sem(qd_scores)} | {mean_sem([r['normalized_qd_score'] for r in rows])} | "
             f"{mean_sem([r['coverage'] for r in rows])} | {statistics.fmean(r['best'] for r in rows):.3g} | "
-            f"{seconds:,.0f} | {args.evals / seconds:.1f} | {ratio} |")
+            f"{seconds:,.0f} | {args.evals / seconds:.1f} | {ratio} |"
+        )
     table = "\n".join(lines)
     print(table)
     (out / "table.md").write_text(table + "\n")

@@ -31,14 +31,14 @@ class Timed(SurrogateObjective):
 
     forward = jacobian = 0.0
 
-    def __call__(self, solutions):  # noqa: ANN001, ANN204
+    def __call__(self, solutions):
         start = time.perf_counter()
         result = super().__call__(solutions)
         _sync(self.device)
         Timed.forward += time.perf_counter() - start
         return result
 
-    def with_jacobian(self, solutions):  # noqa: ANN001, ANN204
+    def with_jacobian(self, solutions):
         start = time.perf_counter()
         result = super().with_jacobian(solutions)
         _sync(self.device)
@@ -62,16 +62,25 @@ def main() -> None:
     device = pick_device(args.device)
     rng = np.random.default_rng(0)
     n, channels = domain.space.dim, len(domain.grids)
-    surrogate = Surrogate(bounds=(domain.space.lower, domain.space.upper), channels=channels,
-                          outputs=1 + len(domain.measures), epochs=2, batch_size=64, learning_rate=1e-4, device=device,
-                          seed=0)
+    surrogate = Surrogate(
+        bounds=(domain.space.lower, domain.space.upper),
+        channels=channels,
+        outputs=1 + len(domain.measures),
+        epochs=2,
+        batch_size=64,
+        learning_rate=1e-4,
+        device=device,
+        seed=0,
+    )
     theta = rng.uniform(domain.space.lower, domain.space.upper, size=(256, n)).astype(np.float32)
     grids = rng.dirichlet(np.ones(1024), size=(256, channels)).reshape(256, channels, 32, 32).astype(np.float32)
     surrogate.fit(theta, grids, rng.random((256, 1 + len(domain.measures))).astype(np.float32))
     exploit(domain, Timed(domain, surrogate), gradients=True, iterations=3, seed=0)  # JIT and warm-up
 
-    print(f"| {args.spec.name} on {device} ({torch.get_num_threads()} threads) | iterations | total s | ms / iteration "
-          "| surrogate forward s | Jacobians s | pyribs and the rest s |")
+    print(
+        f"| {args.spec.name} on {device} ({torch.get_num_threads()} threads) | iterations | total s | ms / iteration "
+        "| surrogate forward s | Jacobians s | pyribs and the rest s |"
+    )
     print("|---|---|---|---|---|---|---|")
     for name, gradients in (("SAS", False), ("DSAS", True)):
         Timed.forward = Timed.jacobian = 0.0
@@ -79,8 +88,10 @@ def main() -> None:
         exploit(domain, Timed(domain, surrogate), gradients=gradients, iterations=args.iterations, seed=1)
         total = time.perf_counter() - start
         rest = total - Timed.forward - Timed.jacobian
-        print(f"| {name} | {args.iterations} | {total:.1f} | {total / args.iterations * 1e3:.2f} | "
-              f"{Timed.forward:.1f} | {Timed.jacobian:.1f} | {rest:.1f} |")
+        print(
+            f"| {name} | {args.iterations} | {total:.1f} | {total / args.iterations * 1e3:.2f} | "
+            f"{Timed.forward:.1f} | {Timed.jacobian:.1f} | {rest:.1f} |"
+        )
 
 
 if __name__ == "__main__":

@@ -23,8 +23,7 @@ WS = {"ws1": ((0.6, 0.05), (0.08, 0.13)), "ws2": ((0.218, 0.626), (0.08, 0.13))}
 def collaboration_problem() -> RepairProblem:
     """Three goals of half-size 0.025 m, each inside ws1 or ws2, pairwise not overlapping."""
     regions = tuple(
-        Region(name=name, x=(c[0] - h[0], c[0] + h[0]), y=(c[1] - h[1], c[1] + h[1]))
-        for name, (c, h) in WS.items()
+        Region(name=name, x=(c[0] - h[0], c[0] + h[0]), y=(c[1] - h[1], c[1] + h[1])) for name, (c, h) in WS.items()
     )
     n = 3
     return RepairProblem(
@@ -67,13 +66,17 @@ def main() -> None:
     def stats(t):
         return " | ".join(f"{v:.2f}" for v in np.percentile(t, [50, 90, 99, 100]))
 
-    print("| proposals | needing the solver | ms: median / p90 / p99 / max (all) "
-          "| ms: median / p90 / p99 / max (solver only) | mean cost (m²) | statuses |")
+    print(
+        "| proposals | needing the solver | ms: median / p90 / p99 / max (all) "
+        "| ms: median / p90 / p99 / max (solver only) | mean cost (m²) | statuses |"
+    )
     print("|---|---|---|---|---|---|")
     counts = ", ".join(f"{s} {statuses.count(s)}" for s in sorted(set(statuses)))
-    print(f"| {len(times)} | {solver.mean():.1%} | {stats(times).replace(' | ', ' / ')} "
-          f"| {stats(times[solver]).replace(' | ', ' / ') if solver.any() else '-'} "
-          f"| {np.mean(costs):.5f} | {counts} |")
+    print(
+        f"| {len(times)} | {solver.mean():.1%} | {stats(times).replace(' | ', ' / ')} "
+        f"| {stats(times[solver]).replace(' | ', ' / ') if solver.any() else '-'} "
+        f"| {np.mean(costs):.5f} | {counts} |"
+    )
 
 
 if __name__ == "__main__":

@@ -27,8 +27,14 @@ def timed_run(spec: Path, *, algorithm: str, budget: int, workers: int) -> tuple
     """(wall seconds, seconds spent inside evaluations) of one search."""
     with tempfile.TemporaryDirectory() as folder:
         start = time.perf_counter()
-        qd.start(spec_file=spec, out=Path(folder) / "run", algorithm=algorithm, budget=budget, seed=0,
-                 backend=qd.Backend(workers=workers, timeout=60))
+        qd.start(
+            spec_file=spec,
+            out=Path(folder) / "run",
+            algorithm=algorithm,
+            budget=budget,
+            seed=0,
+            backend=qd.Backend(workers=workers, timeout=60),
+        )
         wall = time.perf_counter() - start
         lines = (Path(folder) / "run" / "evaluations.jsonl").read_text().splitlines()
         inside = sum(json.loads(line)["seconds"] for line in lines)
@@ -44,7 +50,9 @@ def main() -> None:
 
     toy = ROOT / "tests" / "fixtures" / "toy.yaml"
     timed_run(toy, algorithm="cma_mae", budget=300, workers=1)  # warm caches (numba JIT, imports)
-    print("| machinery (toy domain, CMA-MAE, 1 worker) | evaluations | wall s | in evaluations s | overhead ms / evaluation |")
+    print(
+        "| machinery (toy domain, CMA-MAE, 1 worker) | evaluations | wall s | in evaluations s | overhead ms / evaluation |"
+    )
     print("|---|---|---|---|---|")
     wall, inside = timed_run(toy, algorithm="cma_mae", budget=args.budget, workers=1)
     print(f"| whole run | {args.budget} | {wall:.2f} | {inside:.2f} | {(wall - inside) / args.budget * 1e3:.3f} |")

@@ -72,8 +72,13 @@ def run(domain: Domain, points: np.ndarray) -> dict:
             ticks.append(len(rollout.time))
         # Episodes that ran to the time limit: the issue's "full 10 s episode" (400 ticks in teleop).
         full.append(rollout is not None and rollout.time[-1] >= limit - 1e-9)
-    return {"seconds": np.array(seconds), "cpu": np.array(cpu), "ticks": ticks, "full": np.array(full, dtype=bool),
-            "statuses": statuses}
+    return {
+        "seconds": np.array(seconds),
+        "cpu": np.array(cpu),
+        "ticks": ticks,
+        "full": np.array(full, dtype=bool),
+        "statuses": statuses,
+    }
 
 
 def _is(func: tuple[str, int, str], suffix: str, name: str | None = None) -> bool:
@@ -102,8 +107,9 @@ def time_shares(domain: Domain, points: np.ndarray) -> dict[str, float]:
             # Only calls from outside the part: its internal calls are already inside these.
             shares[part] += sum(edge[3] for caller, edge in callers.items() if _part_of(caller) != part)
     shares["task loop"] = total - sum(shares.values())
-    shares[CONSTRUCTION] = sum(ct for func, (_, _, _, ct, _) in stats.items()
-                               if _is(func, "hritest/sim/world.py", "__init__"))
+    shares[CONSTRUCTION] = sum(
+        ct for func, (_, _, _, ct, _) in stats.items() if _is(func, "hritest/sim/world.py", "__init__")
+    )
     shares["total"] = total
     return shares
 
@@ -121,8 +127,12 @@ def world_construction_ms(domain: Domain, repeats: int = 20) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--spec", action="append", type=Path,
-                        help="spec file (repeatable); default: specs/teleop.yaml and specs/collab.yaml")
+    parser.add_argument(
+        "--spec",
+        action="append",
+        type=Path,
+        help="spec file (repeatable); default: specs/teleop.yaml and specs/collab.yaml",
+    )
     parser.add_argument("--n", type=int, help="scenarios per spec; default 1,000 teleop, 200 collab, 100 other")
     parser.add_argument("--profile-n", type=int, default=50, help="scenarios in the cProfile pass")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random theta")
@@ -142,8 +152,10 @@ def main() -> None:
         shares[name] = time_shares(domain, points[: args.profile_n])
         construction[name] = world_construction_ms(domain)
 
-    print("| spec | scenarios | scenarios / s / core | median ms | p90 ms | max ms | median CPU ms "
-          "| median ticks | full-length episodes: n, median ms | statuses |")
+    print(
+        "| spec | scenarios | scenarios / s / core | median ms | p90 ms | max ms | median CPU ms "
+        "| median ticks | full-length episodes: n, median ms | statuses |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|")
     for name, r in rows:
         ms = r["seconds"] * 1e3
@@ -152,19 +164,22 @@ def main() -> None:
         ticks = f"{np.median(r['ticks']):.0f}" if r["ticks"] else "-"
         full = ms[r["full"]]
         full_cell = f"{len(full)}, {np.median(full):.1f}" if len(full) else "0, -"
-        print(f"| {name} | {n} | {n / r['seconds'].sum():.1f} | {np.median(ms):.1f} | "
-              f"{np.percentile(ms, 90):.1f} | {ms.max():.1f} | {np.median(r['cpu']) * 1e3:.1f} | {ticks} "
-              f"| {full_cell} | {statuses} |")
+        print(
+            f"| {name} | {n} | {n / r['seconds'].sum():.1f} | {np.median(ms):.1f} | "
+            f"{np.percentile(ms, 90):.1f} | {ms.max():.1f} | {np.median(r['cpu']) * 1e3:.1f} | {ticks} "
+            f"| {full_cell} | {statuses} |"
+        )
 
     names = [name for name, _ in rows]
-    print(f"\nWhere the time goes (cProfile over the first {args.profile_n} scenarios; share of "
-          "`evaluate`'s cumulative time):\n")
+    print(
+        f"\nWhere the time goes (cProfile over the first {args.profile_n} scenarios; share of "
+        "`evaluate`'s cumulative time):\n"
+    )
     print("| part | " + " | ".join(names) + " |")
     print("|---|" + "---|" * len(names))
     for part in (*PARTS, "task loop", CONSTRUCTION):
         print(f"| {part} | " + " | ".join(f"{shares[n][part] / shares[n]['total']:.1%}" for n in names) + " |")
-    print("| one `World(layout=...)`, unprofiled (ms) | "
-          + " | ".join(f"{construction[n]:.2f}" for n in names) + " |")
+    print("| one `World(layout=...)`, unprofiled (ms) | " + " | ".join(f"{construction[n]:.2f}" for n in names) + " |")
 
 
 if __name__ == "__main__":

@@ -51,8 +51,9 @@ def _version(value: bool) -> None:
 
 @app.callback()
 def _root(
-    version: Annotated[bool, typer.Option("--version", callback=_version, is_eager=True,
-                                          help="print the version and exit")] = False,
+    version: Annotated[
+        bool, typer.Option("--version", callback=_version, is_eager=True, help="print the version and exit")
+    ] = False,
 ) -> None:
     """Find where a robot policy fails with people, and keep those failures as tests."""
 
@@ -102,9 +103,11 @@ def check(
     for note in report.notes:
         out.print(f"[yellow]note[/yellow] {escape(note)}", highlight=False)
     per = report.seconds_per_scenario
-    out.print(f"one scenario takes {_duration(per)} (median of {len(report.seconds)}); the spec's budget of "
-              f"{report.budget} evaluations is about {_duration(per * report.budget)} of simulation on one worker",
-              highlight=False)
+    out.print(
+        f"one scenario takes {_duration(per)} (median of {len(report.seconds)}); the spec's budget of "
+        f"{report.budget} evaluations is about {_duration(per * report.budget)} of simulation on one worker",
+        highlight=False,
+    )
     for finding in report.findings:
         err.print(f"[red]x[/red] {escape(str(finding))}", highlight=False)
     if not report.ok:
@@ -129,10 +132,14 @@ def show(spec: SpecArg) -> None:
     domain = compile_spec(load_spec(spec))
     s = domain.spec
     out.print(f"[bold]{s.name}[/bold]  {s.description}".rstrip(), highlight=False)
-    out.print(f"task {s.task.name} ({domain.task_cls.__name__}), time limit {s.task.time_limit:g} s, "
-              f"tick {s.task.dt:g} s", highlight=False)
-    out.print(f"robot {s.robot.policy} ({domain.robot_cls.__name__}), "
-              f"human {s.human.policy} ({domain.human_cls.__name__})", highlight=False)
+    out.print(
+        f"task {s.task.name} ({domain.task_cls.__name__}), time limit {s.task.time_limit:g} s, tick {s.task.dt:g} s",
+        highlight=False,
+    )
+    out.print(
+        f"robot {s.robot.policy} ({domain.robot_cls.__name__}), human {s.human.policy} ({domain.human_cls.__name__})",
+        highlight=False,
+    )
 
     table = Table(title=f"theta: {domain.space.dim} components", title_justify="left")
     for column in ("index", "component", "binds", "lower", "upper"):
@@ -142,23 +149,28 @@ def show(spec: SpecArg) -> None:
             table.add_row(str(slot.start + i), label, slot.bind, f"{slot.lower:g}", f"{slot.upper:g}")
     out.print(table)
 
-    archive = Table(title="result archive: " + " x ".join(map(str, domain.archive_dims)) + " cells",
-                    title_justify="left")
+    archive = Table(
+        title="result archive: " + " x ".join(map(str, domain.archive_dims)) + " cells", title_justify="left"
+    )
     for column in ("measure", "expression", "range", "cells"):
         archive.add_column(column)
     for m in domain.measures:
         archive.add_row(m.name, m.expression.text, f"[{m.range[0]:g}, {m.range[1]:g}]", str(m.cells))
     out.print(archive)
-    out.print(f"objective {s.objective.expr} in [{s.objective.range[0]:g}, {s.objective.range[1]:g}] "
-              f"(search subtracts {s.objective.repair_weight:g} x repair cost)", highlight=False)
+    out.print(
+        f"objective {s.objective.expr} in [{s.objective.range[0]:g}, {s.objective.range[1]:g}] "
+        f"(search subtracts {s.objective.repair_weight:g} x repair cost)",
+        highlight=False,
+    )
     out.print(f"failure when {s.failure}", highlight=False)
     for c in s.constraints:
         out.print("constraint " + ", ".join(f"{k}={v}" for k, v in c.model_dump().items()), highlight=False)
     out.print(f"search {s.search.algorithm}, budget {s.search.budget}, seed {s.search.seed}", highlight=False)
 
 
-ThetaOption = Annotated[str, typer.Option("--theta", help="comma-separated theta, in the order 'hritest show' lists",
-                                          show_default=False)]
+ThetaOption = Annotated[
+    str, typer.Option("--theta", help="comma-separated theta, in the order 'hritest show' lists", show_default=False)
+]
 JsonOption = Annotated[bool, typer.Option("--json", help="print JSON instead of a table")]
 
 
@@ -172,12 +184,12 @@ def _domain_and_theta(spec: Path, theta: str):  # noqa: ANN202 - (Domain, np.nda
     try:
         values = np.array([float(v) for v in theta.replace(" ", "").split(",") if v != ""])
     except ValueError:
-        raise typer.BadParameter(f"{theta!r} is not a comma-separated list of numbers",
-                                 param_hint="--theta") from None
+        raise typer.BadParameter(f"{theta!r} is not a comma-separated list of numbers", param_hint="--theta") from None
     if values.shape != (domain.space.dim,):
         raise typer.BadParameter(
             f"got {len(values)} values; {spec} needs {domain.space.dim}: {', '.join(domain.space.labels)}",
-            param_hint="--theta")
+            param_hint="--theta",
+        )
     return domain, values
 
 
@@ -192,8 +204,14 @@ def repair(spec: SpecArg, theta: ThetaOption, json: JsonOption = False) -> None:
     """Repair one scenario: where its objects move to satisfy the constraints, and at what cost."""
     domain, values = _domain_and_theta(spec, theta)
     outcome = domain.repair(values)
-    data = {"status": outcome.status, "theta": values.tolist(), "repaired": outcome.theta.tolist(),
-            "cost": outcome.cost, "regions": outcome.regions, "message": outcome.message}
+    data = {
+        "status": outcome.status,
+        "theta": values.tolist(),
+        "repaired": outcome.theta.tolist(),
+        "cost": outcome.cost,
+        "regions": outcome.regions,
+        "message": outcome.message,
+    }
     if json:
         _print_json(data)
     else:
@@ -242,8 +260,13 @@ def simulate(
         verdict = "[red]FAILURE[/red]" if evaluation.failure else "[green]no failure[/green]"
         out.print(f"{evaluation.status}: {verdict} ({domain.spec.failure}), simulated in {evaluation.seconds:.3f} s")
         table = Table(show_header=False)
-        rows = [("objective", evaluation.objective), ("search objective", evaluation.search_objective),
-                ("repair cost", evaluation.repair_cost), *data["measures"].items(), *evaluation.metrics.items()]
+        rows = [
+            ("objective", evaluation.objective),
+            ("search objective", evaluation.search_objective),
+            ("repair cost", evaluation.repair_cost),
+            *data["measures"].items(),
+            *evaluation.metrics.items(),
+        ]
         for name, value in rows:
             table.add_row(name, f"{value:.6g}")
         out.print(table)
@@ -257,28 +280,43 @@ def simulate(
 
 @command
 def search(
-    spec: Annotated[Path | None, typer.Argument(help="the spec to search (omit with --resume)",
-                                                show_default=False)] = None,
-    resume: Annotated[Path | None, typer.Option(help="continue the killed run in this run directory",
-                                                rich_help_panel="Run")] = None,
-    algorithm: Annotated[str | None, typer.Option(help="random, map_elites, cma_mae, sas, dsas (default: the spec's)",
-                                                  rich_help_panel="Search")] = None,
-    budget: Annotated[int | None, typer.Option(min=1, help="real evaluations (default: the spec's)",
-                                               rich_help_panel="Search")] = None,
+    spec: Annotated[
+        Path | None, typer.Argument(help="the spec to search (omit with --resume)", show_default=False)
+    ] = None,
+    resume: Annotated[
+        Path | None, typer.Option(help="continue the killed run in this run directory", rich_help_panel="Run")
+    ] = None,
+    algorithm: Annotated[
+        str | None,
+        typer.Option(help="random, map_elites, cma_mae, sas, dsas (default: the spec's)", rich_help_panel="Search"),
+    ] = None,
+    budget: Annotated[
+        int | None, typer.Option(min=1, help="real evaluations (default: the spec's)", rich_help_panel="Search")
+    ] = None,
     seed: Annotated[int | None, typer.Option(help="default: the spec's", rich_help_panel="Search")] = None,
-    out_dir: Annotated[Path | None, typer.Option("--out", help="run directory (default: runs/<spec>-<time>)",
-                                                 rich_help_panel="Run")] = None,
-    workers: Annotated[int, typer.Option(help="local worker processes (default: all cores)",
-                                         rich_help_panel="Run")] = os.cpu_count() or 1,
-    cluster: Annotated[str | None, typer.Option(help="Dask scheduler address, e.g. tcp://host:8786",
-                                                rich_help_panel="Run")] = None,
-    timeout: Annotated[float, typer.Option(help="seconds one scenario may take before it is stopped",
-                                           rich_help_panel="Run")] = 300.0,
-    inner_iterations: Annotated[int | None, typer.Option(min=1, help="SAS/DSAS inner-loop iterations per outer "
-                                                         "iteration (default: the spec's)",
-                                                         rich_help_panel="Surrogate")] = None,
-    device: Annotated[str, typer.Option(help="where the surrogate runs: auto, cpu or cuda",
-                                        rich_help_panel="Surrogate")] = "auto",
+    out_dir: Annotated[
+        Path | None, typer.Option("--out", help="run directory (default: runs/<spec>-<time>)", rich_help_panel="Run")
+    ] = None,
+    workers: Annotated[
+        int, typer.Option(help="local worker processes (default: all cores)", rich_help_panel="Run")
+    ] = os.cpu_count() or 1,
+    cluster: Annotated[
+        str | None, typer.Option(help="Dask scheduler address, e.g. tcp://host:8786", rich_help_panel="Run")
+    ] = None,
+    timeout: Annotated[
+        float, typer.Option(help="seconds one scenario may take before it is stopped", rich_help_panel="Run")
+    ] = 300.0,
+    inner_iterations: Annotated[
+        int | None,
+        typer.Option(
+            min=1,
+            help="SAS/DSAS inner-loop iterations per outer iteration (default: the spec's)",
+            rich_help_panel="Surrogate",
+        ),
+    ] = None,
+    device: Annotated[
+        str, typer.Option(help="where the surrogate runs: auto, cpu or cuda", rich_help_panel="Surrogate")
+    ] = "auto",
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress bar (for CI)")] = False,
 ) -> None:
     """Search for diverse failures; writes a run directory. Exit 1 if failures were found."""
@@ -295,9 +333,16 @@ def search(
         if resume is not None:
             found = qd.resume(run_path=resume, backend=backend, progress=progress)
         else:
-            found = qd.start(spec_file=spec, out=out_dir, algorithm=algorithm, budget=budget, seed=seed,
-                             backend=backend, progress=progress,
-                             surrogate=qd.SurrogateOptions(inner_iterations=inner_iterations, device=device))
+            found = qd.start(
+                spec_file=spec,
+                out=out_dir,
+                algorithm=algorithm,
+                budget=budget,
+                seed=seed,
+                backend=backend,
+                progress=progress,
+                surrogate=qd.SurrogateOptions(inner_iterations=inner_iterations, device=device),
+            )
     _print_summary(found)
     from hritest.report import write_report
 
@@ -313,9 +358,19 @@ class _progress:
     def __init__(self, quiet: bool) -> None:
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-        self.bar = None if quiet else Progress(
-            TextColumn("[bold]search"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[stats]}"),
-            TimeRemainingColumn(), console=err, transient=True)
+        self.bar = (
+            None
+            if quiet
+            else Progress(
+                TextColumn("[bold]search"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TextColumn("{task.fields[stats]}"),
+                TimeRemainingColumn(),
+                console=err,
+                transient=True,
+            )
+        )
         self.task = None
         self.stats = "starting"
 
@@ -335,8 +390,10 @@ class _progress:
             self.task = self.bar.add_task("search", total=snapshot.budget, stats=self.stats)
         if snapshot.summary is not None:
             s = snapshot.summary
-            self.stats = (f"QD-score {s.qd_score:,.1f}  coverage {s.coverage:.1%}  best {s.best:.3g}  "
-                          f"failures {snapshot.failures}")
+            self.stats = (
+                f"QD-score {s.qd_score:,.1f}  coverage {s.coverage:.1%}  best {s.best:.3g}  "
+                f"failures {snapshot.failures}"
+            )
         self.bar.update(self.task, completed=snapshot.evaluations, stats=self.stats)
 
 
@@ -348,8 +405,11 @@ def _print_summary(found) -> None:  # noqa: ANN001 - hritest.search.Search
     statuses: dict[str, int] = {}
     for record in found.records.values():
         statuses[record["status"]] = statuses.get(record["status"], 0) + 1
-    table = Table(title=f"{found.domain.spec.name}: {state['algorithm']}, seed {state['seed']}",
-                  title_justify="left", show_header=False)
+    table = Table(
+        title=f"{found.domain.spec.name}: {state['algorithm']}, seed {state['seed']}",
+        title_justify="left",
+        show_header=False,
+    )
     rows = [
         ("run directory", str(found.run_dir.path)),
         ("evaluations", f"{state['evaluations']} ({', '.join(f'{n} {k}' for k, n in sorted(statuses.items()))})"),
@@ -364,14 +424,20 @@ def _print_summary(found) -> None:  # noqa: ANN001 - hritest.search.Search
     out.print(table)
 
 
-
 @command
 def report(
     runs: Annotated[list[Path], typer.Argument(help="a run directory, or several to compare", show_default=False)],
-    out_dir: Annotated[Path | None, typer.Option("--out", help="report folder (default: RUN/report, or "
-                                                 "report-compare/ when comparing runs)", show_default=False)] = None,
-    recordings: Annotated[int, typer.Option(min=0, help="record the N worst failures, plus the most different "
-                                            "ones, for Rerun (0: none)")] = 10,
+    out_dir: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            help="report folder (default: RUN/report, or report-compare/ when comparing runs)",
+            show_default=False,
+        ),
+    ] = None,
+    recordings: Annotated[
+        int, typer.Option(min=0, help="record the N worst failures, plus the most different ones, for Rerun (0: none)")
+    ] = 10,
 ) -> None:
     """Write a run's failure report (report/index.html and summary.md) and its failures' Rerun recordings.
 
@@ -391,18 +457,25 @@ def report(
 
 @command
 def replay(
-    target: Annotated[Path, typer.Argument(help="a run directory (with --failure) or a spec (with --theta)",
-                                           show_default=False)],
-    failure: Annotated[int | None, typer.Option(help="the failure's id in the run (see its report or "
-                                                "failures.yaml)", show_default=False)] = None,
+    target: Annotated[
+        Path, typer.Argument(help="a run directory (with --failure) or a spec (with --theta)", show_default=False)
+    ],
+    failure: Annotated[
+        int | None,
+        typer.Option(help="the failure's id in the run (see its report or failures.yaml)", show_default=False),
+    ] = None,
     theta: Annotated[str | None, typer.Option(help="comma-separated theta, with a SPEC", show_default=False)] = None,
     seed: Annotated[int, typer.Option(help="the evaluation seed, with a SPEC")] = 0,
-    out_path: Annotated[Path | None, typer.Option("--out", help="where to write the recording (default: "
-                                                  "RUN/recordings/ID.rrd, or recordings/SPEC-DIGEST.rrd)",
-                                                  show_default=False)] = None,
+    out_path: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            help="where to write the recording (default: RUN/recordings/ID.rrd, or recordings/SPEC-DIGEST.rrd)",
+            show_default=False,
+        ),
+    ] = None,
     open_: Annotated[bool, typer.Option("--open", help="open the recording in the Rerun viewer")] = False,
-    tolerance: Annotated[float, typer.Option(min=0.0, help="absolute tolerance on the objective and measures")]
-    = 1e-6,
+    tolerance: Annotated[float, typer.Option(min=0.0, help="absolute tolerance on the objective and measures")] = 1e-6,
 ) -> None:
     """Re-simulate a failure (or any scenario), check it reproduces, and write its Rerun recording.
 
@@ -417,13 +490,11 @@ def replay(
         raise Bad(f"{target} does not exist; give a run directory (with --failure) or a spec (with --theta)")
     if target.is_dir():
         if failure is None or theta is not None:
-            raise typer.BadParameter("with a run directory give --failure ID (and no --theta)",
-                                     param_hint="--failure")
+            raise typer.BadParameter("with a run directory give --failure ID (and no --theta)", param_hint="--failure")
         run = RunDirectory.open(target)
         record = rp.stored_failure(run, failure)  # bad input fails before anything is written
         path = recording.check_writable(out_path or run.path / "recordings" / f"{failure}.rrd")
-        result = rp.replay_record(rp.run_domain(run), record, spec_digest=run.meta["spec_digest"],
-                                  tolerance=tolerance)
+        result = rp.replay_record(rp.run_domain(run), record, spec_digest=run.meta["spec_digest"], tolerance=tolerance)
         title = f"{result.domain.spec.name}: failure {failure} ({run.path.resolve().name})"
     else:
         if theta is None or failure is not None:
@@ -432,11 +503,16 @@ def replay(
         if out_path is not None:
             recording.check_writable(out_path)
         result = rp.replay_theta(domain, values, seed=seed, spec_digest=digest(target), tolerance=tolerance)
-        path = recording.check_writable(out_path or Path("recordings") /
-                                        f"{domain.spec.name}-{result.digest[:12]}.rrd")
+        path = recording.check_writable(out_path or Path("recordings") / f"{domain.spec.name}-{result.digest[:12]}.rrd")
         title = f"{domain.spec.name}: seed {seed}"
-    recording.write_recording(path, domain=result.domain, evaluation=result.evaluation, rollout=result.rollout,
-                              recording_id=result.digest, title=title)
+    recording.write_recording(
+        path,
+        domain=result.domain,
+        evaluation=result.evaluation,
+        rollout=result.rollout,
+        recording_id=result.digest,
+        title=title,
+    )
     _print_replay(result)
     out.print(f"recording: {path}", highlight=False)
     if open_:
@@ -457,23 +533,39 @@ def _print_replay(result) -> None:  # noqa: ANN001 - hritest.replay.Replay
         verdict = "[green]match[/green]" if check.ok else "[red]DIFFERS[/red]"
         table.add_row(check.name, show(check.stored), show(check.replayed), verdict)
     out.print(table)
-    out.print(f"compared: status and failure verdict exactly; objective and measures within "
-              f"{result.tolerance:g} absolute", highlight=False)
+    out.print(
+        f"compared: status and failure verdict exactly; objective and measures within {result.tolerance:g} absolute",
+        highlight=False,
+    )
     verdict = "[green]replay matches[/green]" if result.matches else "[red]replay does NOT match[/red]"
     out.print(f"{verdict} (scenario digest {result.digest[:16]})")
 
 
 @command
 def promote(
-    run: Annotated[Path | None, typer.Argument(help="a run directory whose failures to keep", show_default=False)]
-    = None,
-    top: Annotated[int | None, typer.Option(min=1, help="only the N worst failures (default: all)",
-                                            show_default=False)] = None,
-    to: Annotated[Path | None, typer.Option(help="the corpus folder (default: \\[tool.hritest] corpus in the nearest "
-                                            "pyproject.toml, else tests/hri_failures)", show_default=False)] = None,
-    mark_fixed: Annotated[list[str] | None, typer.Option(
-        "--mark-fixed", metavar="ID", help="set status: fixed on this corpus entry (its id, spec/id or file); "
-        "repeat for several", show_default=False)] = None,
+    run: Annotated[
+        Path | None, typer.Argument(help="a run directory whose failures to keep", show_default=False)
+    ] = None,
+    top: Annotated[
+        int | None, typer.Option(min=1, help="only the N worst failures (default: all)", show_default=False)
+    ] = None,
+    to: Annotated[
+        Path | None,
+        typer.Option(
+            help="the corpus folder (default: \\[tool.hritest] corpus in the nearest "
+            "pyproject.toml, else tests/hri_failures)",
+            show_default=False,
+        ),
+    ] = None,
+    mark_fixed: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--mark-fixed",
+            metavar="ID",
+            help="set status: fixed on this corpus entry (its id, spec/id or file); repeat for several",
+            show_default=False,
+        ),
+    ] = None,
 ) -> None:
     """Keep a run's failures in the failure corpus that pytest replays; mark corpus entries fixed.
 
@@ -486,15 +578,20 @@ def promote(
     folder = to if to is not None else hc.default_corpus(Path.cwd())
     if run is not None:
         if mark_fixed and not run.is_dir():
-            raise HritestError(f"{run} is not a run directory; to mark several entries fixed repeat the "
-                               "option: --mark-fixed ID --mark-fixed ID")
+            raise HritestError(
+                f"{run} is not a run directory; to mark several entries fixed repeat the "
+                "option: --mark-fixed ID --mark-fixed ID"
+            )
         promoted = hc.promote(run, corpus=folder, top=top)
         for p in promoted:
             verb = "[green]added[/green]  " if p.added else "unchanged"
             out.print(f"{verb} {p.path}  (evaluation {p.evaluation}, objective {p.objective:.6g})", highlight=False)
         added = sum(p.added for p in promoted)
-        out.print(f"{added} added, {len(promoted) - added} already in the corpus {folder}"
-                  + ("" if promoted else f" ({run} has no failures)"), highlight=False)
+        out.print(
+            f"{added} added, {len(promoted) - added} already in the corpus {folder}"
+            + ("" if promoted else f" ({run} has no failures)"),
+            highlight=False,
+        )
     if mark_fixed:
         for path, before in hc.mark_fixed(folder, [i for ids in mark_fixed for i in ids.split(",") if i]):
             note = "was already fixed" if before == "fixed" else "open -> fixed"
@@ -503,8 +600,10 @@ def promote(
 
 @command
 def new(
-    name: Annotated[str, typer.Argument(help="the domain's name: letters, digits and '_', starting with a letter",
-                                        show_default=False)],
+    name: Annotated[
+        str,
+        typer.Argument(help="the domain's name: letters, digits and '_', starting with a letter", show_default=False),
+    ],
     folder: Annotated[Path, typer.Option("--dir", help="where to write NAME.yaml and NAME_plugins.py")] = Path("."),
 ) -> None:
     """Start a domain: write NAME.yaml and NAME_plugins.py, a minimal spec and plugins that work as written.

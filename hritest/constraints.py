@@ -17,7 +17,6 @@ from hritest import repair
 from hritest.scenario import ScenarioSpace
 from hritest.spec.models import BoundsConstraint, InsideConstraint, MinSeparationConstraint, NoOverlapConstraint, Spec
 
-
 # CP-SAT's deterministic work limit per repair. Measured on the paper's collaboration instance:
 # the slowest case (three goals piled on one point) takes 1.2 s to *prove* optimal at 1.0, but its
 # best repair at 0.2 (0.3 s) already has the optimal cost; an unproven repair is still used.
@@ -86,8 +85,9 @@ class ScenarioRepair:
         for i, allowed in enumerate(self._problem.allowed_regions if self._problem else ()):
             for r in allowed:
                 boxes[i, r] = (regions[r].x, regions[r].y)
-        return PenaltyTerms(lower=self._lower, upper=self._upper, clip_groups=self._clip_groups,
-                            columns=columns, boxes=boxes)
+        return PenaltyTerms(
+            lower=self._lower, upper=self._upper, clip_groups=self._clip_groups, columns=columns, boxes=boxes
+        )
 
     def check_feasible(self) -> None:
         """Raises :class:`repair.InfeasibleConstraints` if no scenario satisfies the constraints."""
@@ -113,11 +113,13 @@ class ScenarioRepair:
             for name, index in zip(self._problem.object_names, result.regions)
         }
         if result.status not in ("unchanged", "repaired"):
-            return RepairOutcome(theta=theta, cost=cost, regions=regions, status=f"repair_{result.status}",
-                                 message=result.message)
+            return RepairOutcome(
+                theta=theta, cost=cost, regions=regions, status=f"repair_{result.status}", message=result.message
+            )
         theta[self._columns[bound]] = result.xy[bound]
-        return RepairOutcome(theta=self._within_bounds(theta), cost=cost + result.cost, regions=regions,
-                             status=result.status)
+        return RepairOutcome(
+            theta=self._within_bounds(theta), cost=cost + result.cost, regions=regions, status=result.status
+        )
 
     def _within_bounds(self, theta: np.ndarray) -> np.ndarray:
         # After the placement program (whose own bounds keep what it moves inside), so the
@@ -137,14 +139,16 @@ def _clip_groups(spec: Spec, space: ScenarioSpace) -> list[list[int]] | None:
         for group in constraint.groups:
             groups.append([i for name in group for i in range(slots[name].start, slots[name].start + slots[name].size)])
             grouped.update(group)
-    groups += [[i] for slot in space.slots if slot.name not in grouped
-               for i in range(slot.start, slot.start + slot.size)]
+    groups += [
+        [i] for slot in space.slots if slot.name not in grouped for i in range(slot.start, slot.start + slot.size)
+    ]
     return groups
 
 
 def _program(spec: Spec, space: ScenarioSpace):  # noqa: ANN202 - (problem, columns, nominal xy)
-    placement = [c for c in spec.constraints
-                 if isinstance(c, InsideConstraint | NoOverlapConstraint | MinSeparationConstraint)]
+    placement = [
+        c for c in spec.constraints if isinstance(c, InsideConstraint | NoOverlapConstraint | MinSeparationConstraint)
+    ]
     if not placement:
         return None, None, None
     names = list(dict.fromkeys(name for c in placement for name in c.objects))

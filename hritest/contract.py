@@ -30,18 +30,24 @@ def class_problems(cls: type, *, kind: str) -> list[str]:
         return problems
     problems = _keywords(cls, ("context",), name)
     if "spec" in _parameters(cls):
-        problems = [f"{name}: __init__ takes the spec (hritest 0.1); it now takes one keyword, context (a "
-                    f"hritest.protocols.TaskContext with dt, time_limit, params, scenario, world): see {MIGRATION}"]
+        problems = [
+            f"{name}: __init__ takes the spec (hritest 0.1); it now takes one keyword, context (a "
+            f"hritest.protocols.TaskContext with dt, time_limit, params, scenario, world): see {MIGRATION}"
+        ]
     if not callable(getattr(cls, "run", None)):
         problems.append(f"{name} has no run(*, robot, human, rng) method returning a hritest.protocols.Rollout")
     metrics = getattr(cls, "metrics", None)
     if not (isinstance(metrics, tuple) and all(isinstance(m, str) for m in metrics)):
-        problems.append(f"{name}: the metrics class attribute must be a tuple of the metric names it reports, e.g. "
-                        f"metrics = ('completion_time',); it is {metrics!r}")
+        problems.append(
+            f"{name}: the metrics class attribute must be a tuple of the metric names it reports, e.g. "
+            f"metrics = ('completion_time',); it is {metrics!r}"
+        )
     if hasattr(cls, "agents") and not hasattr(cls, "grids"):
-        problems.append(f"{name} declares agents (hritest 0.1); declare its occupancy grids instead, "
-                        f"grids = {{{', '.join(f'{a!r}: (32, 32)' for a in cls.agents)}}}, and return them as "
-                        f"Rollout(grids=...): see {MIGRATION}")
+        problems.append(
+            f"{name} declares agents (hritest 0.1); declare its occupancy grids instead, "
+            f"grids = {{{', '.join(f'{a!r}: (32, 32)' for a in cls.agents)}}}, and return them as "
+            f"Rollout(grids=...): see {MIGRATION}"
+        )
     else:
         problems += _grid_declaration(cls, name)
     return problems
@@ -72,8 +78,10 @@ def _rollout_problems(cls: type, rollout: object) -> list[str]:
     ticks = len(time)
     declared = dict(getattr(cls, "grids", {}))
     if set(rollout.grids) != set(declared):
-        problems.append(f"it declares grids {sorted(declared)} but returned {sorted(rollout.grids)}; return "
-                        "exactly the declared ones (or change the grids class attribute)")
+        problems.append(
+            f"it declares grids {sorted(declared)} but returned {sorted(rollout.grids)}; return "
+            "exactly the declared ones (or change the grids class attribute)"
+        )
     for grid_name, grid in rollout.grids.items():
         shape = np.shape(grid)
         if grid_name in declared and shape != tuple(declared[grid_name]):
@@ -81,8 +89,10 @@ def _rollout_problems(cls: type, rollout: object) -> list[str]:
     for traj_name, points in rollout.trajectories.items():
         shape = np.shape(points)
         if len(shape) != 2 or shape[1] != 3 or shape[0] > ticks:
-            problems.append(f"trajectory {traj_name!r} has shape {shape}; it needs (n, 3) world positions "
-                            f"with n <= {ticks} (one per entry of time)")
+            problems.append(
+                f"trajectory {traj_name!r} has shape {shape}; it needs (n, 3) world positions "
+                f"with n <= {ticks} (one per entry of time)"
+            )
     for series_name, values in rollout.series.items():
         shape = np.shape(values)
         if len(shape) != 1 or shape[0] > ticks:
@@ -95,9 +105,12 @@ def _rollout_problems(cls: type, rollout: object) -> list[str]:
 
 def missing_metrics(cls: type, rollout: Rollout) -> list[str]:
     """Declared metrics the rollout does not report."""
-    return [f"{plugin_name(cls)} declares metric {metric!r} but its Rollout.metrics lacks it; report it, or "
-            "remove it from the metrics class attribute" for metric in getattr(cls, "metrics", ())
-            if metric not in rollout.metrics]
+    return [
+        f"{plugin_name(cls)} declares metric {metric!r} but its Rollout.metrics lacks it; report it, or "
+        "remove it from the metrics class attribute"
+        for metric in getattr(cls, "metrics", ())
+        if metric not in rollout.metrics
+    ]
 
 
 def nonfinite_metrics(rollout: Rollout) -> list[str]:
@@ -125,10 +138,16 @@ def plugin_name(cls: type) -> str:
 def _grid_declaration(cls: type, name: str) -> list[str]:
     grids = getattr(cls, "grids", {})
     if not isinstance(grids, Mapping):
-        return [f"{name}: the grids class attribute must map each grid's name to its shape, e.g. grids = {{'robot': (32, 32)}}; "
-                f"it is {grids!r}"]
-    return [f"{name}: grids[{grid!r}] is {shape!r}; the surrogate takes {GRID_SHAPE} grids (bin with "
-            "hritest.metrics.occupancy_grid)" for grid, shape in grids.items() if tuple(shape) != GRID_SHAPE]
+        return [
+            f"{name}: the grids class attribute must map each grid's name to its shape, e.g. grids = {{'robot': (32, 32)}}; "
+            f"it is {grids!r}"
+        ]
+    return [
+        f"{name}: grids[{grid!r}] is {shape!r}; the surrogate takes {GRID_SHAPE} grids (bin with "
+        "hritest.metrics.occupancy_grid)"
+        for grid, shape in grids.items()
+        if tuple(shape) != GRID_SHAPE
+    ]
 
 
 def _parameters(cls: type) -> dict[str, inspect.Parameter]:
@@ -146,5 +165,7 @@ def _keywords(cls: type, names: tuple[str, ...], qualname: str) -> list[str]:
     if not missing:
         return []
     wanted = ", ".join(names)
-    return [f"{qualname}: __init__ must accept the keyword argument{'s' if len(names) > 1 else ''} {wanted} "
-            f"(it lacks {', '.join(missing)})"]
+    return [
+        f"{qualname}: __init__ must accept the keyword argument{'s' if len(names) > 1 else ''} {wanted} "
+        f"(it lacks {', '.join(missing)})"
+    ]

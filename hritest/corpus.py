@@ -31,7 +31,7 @@ import math
 import os
 import re
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -40,8 +40,10 @@ from hritest.errors import HritestError
 FORMAT = 1
 DEFAULT_CORPUS = Path("tests") / "hri_failures"
 STATUSES = ("open", "fixed")
-HEADER = ("# hritest failure corpus entry (replayed by pytest). Change `status` by hand or with\n"
-          "# `hritest promote --mark-fixed ID`; edit nothing else.\n")
+HEADER = (
+    "# hritest failure corpus entry (replayed by pytest). Change `status` by hand or with\n"
+    "# `hritest promote --mark-fixed ID`; edit nothing else.\n"
+)
 _HEX64 = re.compile(r"[0-9a-f]{64}")
 
 
@@ -106,8 +108,10 @@ def _configured_corpus(pyproject: Path) -> str | None:
         return None  # not ours to judge; pip or pytest will complain about a broken pyproject.toml
     value = data.get("tool", {}).get("hritest", {}).get("corpus")
     if value is not None and not isinstance(value, str):
-        raise CorpusError(f"{pyproject}: [tool.hritest] corpus must be a folder path (a string), "
-                          f"got {value!r} ({type(value).__name__})")
+        raise CorpusError(
+            f"{pyproject}: [tool.hritest] corpus must be a folder path (a string), "
+            f"got {value!r} ({type(value).__name__})"
+        )
     return value
 
 
@@ -211,7 +215,7 @@ class _Fields:
         if not required and name not in self.data:
             return {}
         value = self._get(name)
-        if not isinstance(value, dict) or not value and required:
+        if not isinstance(value, dict) or (not value and required):
             raise self.bad(name, "must be a mapping of names to numbers")
         out: dict[str, Any] = {}
         for key, item in value.items():
@@ -279,11 +283,15 @@ def promote(run_path: Path, *, corpus: Path, top: int | None = None) -> list[Pro
     spec_file = Path(run.meta["spec_file"])
     spec_digest = run.meta["spec_digest"]
     if not spec_file.is_file():
-        raise CorpusError(f"{spec_file} (the spec of {run.path}) no longer exists; a corpus entry must point "
-                          "at the spec it replays with")
+        raise CorpusError(
+            f"{spec_file} (the spec of {run.path}) no longer exists; a corpus entry must point "
+            "at the spec it replays with"
+        )
     if digest(spec_file) != spec_digest:
-        raise CorpusError(f"{spec_file} changed since the run {run.path} started, so its failures would be "
-                          "stale at once; run a new search with the current spec and promote from that")
+        raise CorpusError(
+            f"{spec_file} changed since the run {run.path} started, so its failures would be "
+            "stale at once; run a new search with the current spec and promote from that"
+        )
     records = {r["index"]: r for r in run.evaluations()}
     ids = replay.failure_ids(run, list(records.values()))
     chosen = ids if top is None else ids[:top]
@@ -314,10 +322,16 @@ def promote(run_path: Path, *, corpus: Path, top: int | None = None) -> list[Pro
                 "theta_repaired": dict(zip(labels, record["theta_repaired"])),
                 "metrics": dict(record.get("metrics") or {}),
                 "scenario_digest": scenario,
-                "versions": {k: v for k, v in run.meta.get("versions", {}).items()
-                             if k in ("hritest", "mujoco", "python", "machine")},
-                "origin": {"run": str(run.path.resolve()), "evaluation": index,
-                           "promoted": datetime.now(timezone.utc).isoformat(timespec="seconds")},
+                "versions": {
+                    k: v
+                    for k, v in run.meta.get("versions", {}).items()
+                    if k in ("hritest", "mujoco", "python", "machine")
+                },
+                "origin": {
+                    "run": str(run.path.resolve()),
+                    "evaluation": index,
+                    "promoted": datetime.now(UTC).isoformat(timespec="seconds"),
+                },
             }
             atomic_write(path, dump_entry(data))
         done.append(Promoted(path=path, evaluation=index, objective=record["objective"], added=added))
@@ -347,8 +361,10 @@ def find_entries(corpus: Path, ids: list[str]) -> list[Path]:
         if not matches and Path(ident).is_file():
             matches = [f for f in files if f.resolve() == Path(ident).resolve()]
         if len(matches) > 1:
-            raise CorpusError(f"{ident!r} names {len(matches)} corpus entries "
-                              f"({', '.join(str(m.relative_to(corpus)) for m in matches)}); give spec/id")
+            raise CorpusError(
+                f"{ident!r} names {len(matches)} corpus entries "
+                f"({', '.join(str(m.relative_to(corpus)) for m in matches)}); give spec/id"
+            )
         (found.append(matches[0]) if matches else unknown.append(ident))
     if unknown:
         known = ", ".join(str(f.relative_to(corpus).with_suffix("")) for f in files[:30]) or "none"

@@ -69,7 +69,7 @@ def _import(module_ref: str, base: Path | None):  # noqa: ANN202 - a module
         return importlib.import_module(module_ref)
     except PluginError:
         raise
-    except Exception as exc:  # noqa: BLE001 - any failure in a user's module is reported, not raised raw
+    except Exception as exc:
         last = traceback.format_exception_only(exc)[-1].strip()
         raise PluginError(f"plugin module {module_ref!r} does not import: {last}") from exc
 

@@ -75,8 +75,10 @@ class Region:
         for axis in ("x", "y"):
             lo, hi = (float(v) for v in getattr(self, axis))
             if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
-                raise ValueError(f"region {self.name!r}: {axis} must be (lo, hi) with finite "
-                                 f"lo <= hi, got {getattr(self, axis)!r}; swap the bounds")
+                raise ValueError(
+                    f"region {self.name!r}: {axis} must be (lo, hi) with finite "
+                    f"lo <= hi, got {getattr(self, axis)!r}; swap the bounds"
+                )
             object.__setattr__(self, axis, (lo, hi))
 
 
@@ -120,11 +122,9 @@ class RepairProblem:
             raise ValueError("bounds[i, axis] must be (lo, hi) with lo <= hi; swap the bounds")
         allowed = tuple(tuple(int(r) for r in a) for a in self.allowed_regions)
         if len(allowed) != n:
-            raise ValueError(f"allowed_regions needs one tuple per object ({n}), "
-                             f"got {len(allowed)}")
+            raise ValueError(f"allowed_regions needs one tuple per object ({n}), got {len(allowed)}")
         if any(not 0 <= r < len(self.regions) for a in allowed for r in a):
-            raise ValueError(f"allowed_regions {allowed} index past the "
-                             f"{len(self.regions)} regions")
+            raise ValueError(f"allowed_regions {allowed} index past the {len(self.regions)} regions")
         pairs = tuple((int(i), int(j)) for i, j in self.no_overlap)
         seps = tuple((int(i), int(j), float(d)) for i, j, d in self.min_separation)
         for i, j, *distance in pairs + seps:
@@ -132,9 +132,15 @@ class RepairProblem:
                 raise ValueError(f"pair ({i}, {j}) must name two different objects in 0..{n - 1}")
             if distance and not (math.isfinite(distance[0]) and distance[0] > 0):
                 raise ValueError(f"min_separation distance must be > 0, got {distance[0]}")
-        for field, value in [("object_names", names), ("half_sizes", sizes), ("bounds", bounds),
-                             ("regions", tuple(self.regions)), ("allowed_regions", allowed),
-                             ("no_overlap", pairs), ("min_separation", seps)]:
+        for field, value in [
+            ("object_names", names),
+            ("half_sizes", sizes),
+            ("bounds", bounds),
+            ("regions", tuple(self.regions)),
+            ("allowed_regions", allowed),
+            ("no_overlap", pairs),
+            ("min_separation", seps),
+        ]:
             object.__setattr__(self, field, value)
 
     @property
@@ -195,8 +201,10 @@ def _violations(problem: RepairProblem, xy: np.ndarray, tol: float) -> Iterator[
     names, b = problem.object_names, problem.bounds
     for i in range(problem.n):
         if not _inside(xy[i], b[i, 0], b[i, 1], tol):
-            yield (f"{names[i]} at ({xy[i, 0]:.6g}, {xy[i, 1]:.6g}) is outside its bounds "
-                   f"x in {tuple(b[i, 0])}, y in {tuple(b[i, 1])}")
+            yield (
+                f"{names[i]} at ({xy[i, 0]:.6g}, {xy[i, 1]:.6g}) is outside its bounds "
+                f"x in {tuple(b[i, 0])}, y in {tuple(b[i, 1])}"
+            )
         if problem.allowed_regions[i] and _region_of(problem, xy, i, tol) is None:
             listed = ", ".join(problem.regions[r].name for r in problem.allowed_regions[i])
             yield f"{names[i]} is outside every allowed region ({listed})"
@@ -297,8 +305,11 @@ def repair(problem: RepairProblem, xy: np.ndarray, *, time_limit: float = 1.0) -
         return RepairResult(xy, 0.0, regions, "unchanged", "input satisfies every constraint")
     boxes = [_boxes(problem, i) for i in range(problem.n)]
     if any(not b for b in boxes):
-        return _failed(xy, "infeasible", "an object's allowed regions all lie outside its bounds; "
-                       "run check_feasible(problem) to see which")
+        return _failed(
+            xy,
+            "infeasible",
+            "an object's allowed regions all lie outside its bounds; run check_feasible(problem) to see which",
+        )
     projected, chosen = _project(xy, boxes)
     if is_valid(problem, projected, tol=0.0):
         regions = [region for region, _, _ in chosen]
@@ -348,8 +359,7 @@ def _push_apart(problem: RepairProblem, xy0: np.ndarray, xy: np.ndarray, chosen)
     xy = xy.copy()
     for _ in range(4 * problem.n**2):
         pairs = [(i, j) for i, j in problem.no_overlap if not _apart(problem, xy, i, j, 1e-12)]
-        seps = [(i, j, d) for i, j, d in problem.min_separation
-                if not _separated(xy[i], xy[j], d, 1e-12)]
+        seps = [(i, j, d) for i, j, d in problem.min_separation if not _separated(xy[i], xy[j], d, 1e-12)]
         if pairs:
             _separate_boxes(problem, xy0, xy, *pairs[0], chosen)
         elif seps:
@@ -417,8 +427,7 @@ class _Model:
     def _add_object(self, name: str, target: np.ndarray, candidates, hint: np.ndarray) -> None:
         m, F = self.model, _OBJ_SCALE
         pos, cost, lits, width = [0, 0], [0, 0], [], 0
-        hinted = next((b for b, (_, lo, hi) in enumerate(candidates)
-                       if _inside(hint / _SCALE, *zip(lo, hi), 0)), 0)
+        hinted = next((b for b, (_, lo, hi) in enumerate(candidates) if _inside(hint / _SCALE, *zip(lo, hi), 0)), 0)
         for b, (region, lo, hi) in enumerate(candidates):
             lattice = _lattice_box(lo, hi)
             if lattice is None:
@@ -520,8 +529,9 @@ def _no_overlap_lines(problem: RepairProblem, i: int, j: int) -> list[tuple[tupl
 #: Small components matter: lattice points on ``u . delta = R`` are ``|u|`` units apart, so each
 #: line's lattice optimum is close to its continuous one. With ~1000-unit directions CP-SAT took
 #: seconds for one pair.
-_DIRECTIONS = sorted({(a, b) for a in range(-3, 4) for b in range(-3, 4) if math.gcd(a, b) == 1},
-                     key=lambda u: math.atan2(u[1], u[0]))
+_DIRECTIONS = sorted(
+    {(a, b) for a in range(-3, 4) for b in range(-3, 4) if math.gcd(a, b) == 1}, key=lambda u: math.atan2(u[1], u[0])
+)
 
 
 def _separation_lines(d: float) -> list[tuple[tuple[int, int], int]]:
@@ -539,30 +549,46 @@ def _separation_lines(d: float) -> list[tuple[tuple[int, int], int]]:
 def _solve(problem: RepairProblem, xy: np.ndarray, boxes, hint, time_limit: float) -> RepairResult:
     extent = max([np.abs(xy).max()] + [np.abs([lo, hi]).max() for b in boxes for _, lo, hi in b])
     if extent * _SCALE > _MAX_UNITS:
-        return _failed(xy, "error", f"coordinates beyond {_MAX_UNITS / _SCALE:g} m do not fit "
-                       "the repair lattice; express positions in metres near the origin")
+        return _failed(
+            xy,
+            "error",
+            f"coordinates beyond {_MAX_UNITS / _SCALE:g} m do not fit "
+            "the repair lattice; express positions in metres near the origin",
+        )
     try:
         built = _Model(problem, xy, boxes, hint)
         solver = _solver(time_limit, problem.n, bool(problem.min_separation))
         status = solver.solve(built.model)
     except _NoLatticePoint as exc:
-        return _failed(xy, "infeasible", f"no allowed region of {exc} contains a point of the "
-                       f"2**-{LATTICE_BITS} m repair lattice; widen it")
-    except Exception as exc:  # noqa: BLE001 - a solver failure is a status, never a crash
+        return _failed(
+            xy,
+            "infeasible",
+            f"no allowed region of {exc} contains a point of the 2**-{LATTICE_BITS} m repair lattice; widen it",
+        )
+    except Exception as exc:
         return _failed(xy, "error", f"CP-SAT failed: {exc!r}")
     if status == cp_model.OPTIMAL:
         return _extract(problem, xy, boxes, built, solver)
     if status == cp_model.INFEASIBLE:
-        return _failed(xy, "infeasible", "no placement satisfies the constraints; run "
-                       "check_feasible(problem) to see which conflict")
+        return _failed(
+            xy,
+            "infeasible",
+            "no placement satisfies the constraints; run check_feasible(problem) to see which conflict",
+        )
     if status == cp_model.FEASIBLE:
         # A valid repair that is merely unproven is far more use to a search than a failed scenario.
         found = _extract(problem, xy, boxes, built, solver)
-        return dataclasses.replace(found, message=f"the best repair CP-SAT found within its deterministic time limit "
-                                      f"{time_limit:g}; not proven optimal")
+        return dataclasses.replace(
+            found,
+            message=f"the best repair CP-SAT found within its deterministic time limit "
+            f"{time_limit:g}; not proven optimal",
+        )
     if status == cp_model.UNKNOWN:
-        return _failed(xy, "timeout", f"CP-SAT reached its deterministic time limit {time_limit:g} "
-                       "before finding a repair; input returned")
+        return _failed(
+            xy,
+            "timeout",
+            f"CP-SAT reached its deterministic time limit {time_limit:g} before finding a repair; input returned",
+        )
     return _failed(xy, "error", f"CP-SAT returned {solver.status_name(status)}")
 
 
@@ -590,8 +616,9 @@ def _extract(problem: RepairProblem, xy0, boxes, built: _Model, solver) -> Repai
     chosen = [next(box for box in boxes[i] if box[0] == r) for i, r in enumerate(regions)]
     xy = _polish(problem, xy0, xy, chosen)
     if not is_valid(problem, xy, tol=0.0):  # defensive: never hand back an invalid repair
-        return _failed(xy0, "error", "internal error: the lattice solution violates "
-                       + "; ".join(violations(problem, xy)))
+        return _failed(
+            xy0, "error", "internal error: the lattice solution violates " + "; ".join(violations(problem, xy))
+        )
     return _result(xy0, xy, regions, f"CP-SAT optimum on the 2**-{LATTICE_BITS} m lattice")
 
 
@@ -675,8 +702,7 @@ def _feasibility_model(problem: RepairProblem):
 
     for i, name in enumerate(names):
         b = problem.bounds[i]
-        _add_box(m, pos[i], b[:, 0], b[:, 1], group(f"{name} within its bounds x in {tuple(b[0])}, "
-                                                    f"y in {tuple(b[1])}"))
+        _add_box(m, pos[i], b[:, 0], b[:, 1], group(f"{name} within its bounds x in {tuple(b[0])}, y in {tuple(b[1])}"))
         if problem.allowed_regions[i]:
             listed = " or ".join(problem.regions[r].name for r in problem.allowed_regions[i])
             inside = [m.new_bool_var("") for _ in problem.allowed_regions[i]]
@@ -736,8 +762,10 @@ def clip_repair(
     lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
     d = theta.shape[-1] if theta.ndim else -1
     if theta.ndim not in (1, 2) or lo.shape != (d,) or hi.shape != (d,):
-        raise ValueError(f"theta must be (d,) or (batch, d) with lo and hi of shape (d,); got "
-                         f"{theta.shape}, {lo.shape} and {hi.shape}")
+        raise ValueError(
+            f"theta must be (d,) or (batch, d) with lo and hi of shape (d,); got "
+            f"{theta.shape}, {lo.shape} and {hi.shape}"
+        )
     if (lo > hi).any():
         raise ValueError(f"lo must be <= hi; components {np.flatnonzero(lo > hi).tolist()} are not")
     excess = np.maximum(lo - theta, 0.0) + np.maximum(theta - hi, 0.0)
@@ -751,8 +779,7 @@ def _membership(groups: Sequence[Sequence[int]] | None, d: int) -> np.ndarray:
     for g in groups or ():
         g = [int(k) for k in g]
         if any(not 0 <= k < d for k in g) or seen & set(g) or len(set(g)) != len(g):
-            raise ValueError(f"groups must be disjoint lists of indices in 0..{d - 1}, "
-                             f"got {groups}")
+            raise ValueError(f"groups must be disjoint lists of indices in 0..{d - 1}, got {groups}")
         seen |= set(g)
         rows.append(np.isin(np.arange(d), g).astype(float))
     rows += [np.eye(d)[k] for k in range(d) if k not in seen]

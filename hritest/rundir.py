@@ -32,7 +32,7 @@ import platform
 import shutil
 import tarfile
 import tempfile
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -91,10 +91,11 @@ class RunDirectory:
         self.meta = meta
 
     @classmethod
-    def create(cls, *, root: Path, spec_file: Path, name: str, meta: dict[str, Any],
-               folder: Path | None = None) -> RunDirectory:
+    def create(
+        cls, *, root: Path, spec_file: Path, name: str, meta: dict[str, Any], folder: Path | None = None
+    ) -> RunDirectory:
         """A new run folder under ``root`` (or exactly ``folder``), with the spec and ``run.json``."""
-        stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
+        stamp = datetime.now(UTC).strftime("%Y%m%d-%H%M%S")
         path = Path(folder) if folder else Path(root) / f"{name}-{stamp}"
         if path.exists() and any(path.iterdir()):
             raise RunDirectoryError(f"{path} already exists and is not empty; choose another --out or remove it")
@@ -104,7 +105,7 @@ class RunDirectory:
             "format": FORMAT,
             "spec_file": str(Path(spec_file).resolve()),
             "spec_digest": digest(spec_file),
-            "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            "created": datetime.now(UTC).isoformat(timespec="seconds"),
             "versions": versions(),
             **meta,
         }
@@ -210,7 +211,7 @@ class RunDirectory:
             return None
         try:
             return pickle.loads(path.read_bytes())
-        except Exception as exc:  # noqa: BLE001 - any unpickling failure means the same thing
+        except Exception as exc:
             raise RunDirectoryError(f"{path} is corrupt ({type(exc).__name__}); the run cannot be resumed") from None
 
     def write_csv(self, name: str, rows: list[dict[str, Any]]) -> None:
@@ -237,12 +238,15 @@ def unpack(archive: Path, into: Path) -> RunDirectory:
             members = tar.getmembers()
             tops = {Path(m.name).parts[0] for m in members}
             if len(tops) != 1 or f"{next(iter(tops))}/{RUN_FILE}" not in {m.name for m in members}:
-                raise RunDirectoryError(f"{archive} holds no single run folder; give a file that "
-                                        "RunDirectory.pack (benchmarks/stash.py save) wrote")
+                raise RunDirectoryError(
+                    f"{archive} holds no single run folder; give a file that "
+                    "RunDirectory.pack (benchmarks/stash.py save) wrote"
+                )
             target = into / tops.pop()
             if target.exists():
-                raise RunDirectoryError(f"{target} exists already; resume it there, or move it away to unpack "
-                                        f"{archive} in its place")
+                raise RunDirectoryError(
+                    f"{target} exists already; resume it there, or move it away to unpack {archive} in its place"
+                )
             into.mkdir(parents=True, exist_ok=True)
             staging = Path(tempfile.mkdtemp(dir=into, prefix=".unpack-"))
             try:  # into a hidden folder first, so a failure leaves no half-unpacked run behind
@@ -251,6 +255,7 @@ def unpack(archive: Path, into: Path) -> RunDirectory:
             finally:
                 shutil.rmtree(staging, ignore_errors=True)
     except (OSError, tarfile.TarError, lzma.LZMAError, EOFError) as exc:
-        raise RunDirectoryError(f"{archive} cannot be unpacked ({exc}); give a file that "
-                                "RunDirectory.pack (benchmarks/stash.py save) wrote") from None
+        raise RunDirectoryError(
+            f"{archive} cannot be unpacked ({exc}); give a file that RunDirectory.pack (benchmarks/stash.py save) wrote"
+        ) from None
     return RunDirectory.open(target)

@@ -32,14 +32,18 @@ def write_domain(name: str, *, folder: Path) -> tuple[Path, Path]:
             exists already (then neither is written: nobody's work is overwritten).
     """
     if not NAME.match(name):
-        raise ScaffoldError(f"{name!r} cannot name a domain: use letters, digits and '_', starting with a "
-                            f"letter (it names the spec and the module {name}_plugins), e.g. {suggest(name)}")
+        raise ScaffoldError(
+            f"{name!r} cannot name a domain: use letters, digits and '_', starting with a "
+            f"letter (it names the spec and the module {name}_plugins), e.g. {suggest(name)}"
+        )
     folder = Path(folder)
     files = {folder / f"{name}.yaml": "spec.yaml.tmpl", folder / f"{name}_plugins.py": "plugins.py.tmpl"}
     existing = [str(path) for path in files if path.exists()]
     if existing:
-        raise ScaffoldError(f"{' and '.join(existing)} exist{'s' if len(existing) == 1 else ''} already; choose "
-                            "another NAME or --dir, or move the file away (hritest new never overwrites)")
+        raise ScaffoldError(
+            f"{' and '.join(existing)} exist{'s' if len(existing) == 1 else ''} already; choose "
+            "another NAME or --dir, or move the file away (hritest new never overwrites)"
+        )
     values = {"name": name, "Name": "".join(part[:1].upper() + part[1:] for part in name.split("_"))}
     try:
         folder.mkdir(parents=True, exist_ok=True)
@@ -48,8 +52,9 @@ def write_domain(name: str, *, folder: Path) -> tuple[Path, Path]:
             with open(path, "x", encoding="utf-8") as file:  # "x": fail rather than overwrite, even in a race
                 file.write(text)
     except OSError as exc:
-        raise ScaffoldError(f"cannot write the domain into {folder}: {exc.strerror or exc}; choose another "
-                            "--dir") from None
+        raise ScaffoldError(
+            f"cannot write the domain into {folder}: {exc.strerror or exc}; choose another --dir"
+        ) from None
     spec, plugins = files
     return spec, plugins
 

@@ -96,12 +96,19 @@ class ScenarioSpace:
                 objects[slot.target]["xyz".index(slot.attribute)] = value
             else:
                 bodies.setdefault(slot.target, {})[slot.attribute] = value
-        return Scenario(objects=objects, human=params["human"], robot=params["robot"], task=params["task"],
-                        bodies=bodies, values=values)
+        return Scenario(
+            objects=objects,
+            human=params["human"],
+            robot=params["robot"],
+            task=params["task"],
+            bodies=bodies,
+            values=values,
+        )
 
     def _check(self, theta: np.ndarray) -> np.ndarray:
         theta = np.asarray(theta, dtype=float)
         if theta.shape != (self.dim,):
-            raise ValueError(f"theta has shape {theta.shape}; this spec's theta has {self.dim} components "
-                             f"({', '.join(self.labels)})")
+            raise ValueError(
+                f"theta has shape {theta.shape}; this spec's theta has {self.dim} components ({', '.join(self.labels)})"
+            )
         return theta

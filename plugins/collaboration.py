@@ -21,12 +21,12 @@ from dataclasses import dataclass, field, replace
 from typing import ClassVar
 
 import numpy as np
+from hritest_plugins import hindsight, scene
 from pydantic import BaseModel, ConfigDict, Field
 
 from hritest import metrics
 from hritest.protocols import HumanPolicy, RobotPolicy, Rollout, TaskContext
 from hritest.sim import shared_world
-from hritest_plugins import hindsight, scene
 
 HAND_HEIGHT = 0.96
 
@@ -65,8 +65,15 @@ class CollaborationTask:
 
     kind: ClassVar[str] = "task"
     metrics: ClassVar[tuple[str, ...]] = (
-        "completion_time", "min_goal_distance", "max_wrong_goal_probability", "robot_path_length",
-        "human_path_length", "total_wait_time", "human_wait_time", "robot_wait_time", "replans",
+        "completion_time",
+        "min_goal_distance",
+        "max_wrong_goal_probability",
+        "robot_path_length",
+        "human_path_length",
+        "total_wait_time",
+        "human_wait_time",
+        "robot_wait_time",
+        "replans",
     )
     grids: ClassVar[dict[str, tuple[int, int]]] = {"human": (32, 32), "robot": (32, 32)}
     Params = _Params
@@ -90,8 +97,9 @@ class CollaborationTask:
     def _ticks(self, seconds: float) -> int:
         return int(round(seconds / self.dt))
 
-    def _wait_or_work(self, agent: _Agent, who: str, work_time: float, blocked: dict[int, str],
-                      record: _Record, t: float) -> None:
+    def _wait_or_work(
+        self, agent: _Agent, who: str, work_time: float, blocked: dict[int, str], record: _Record, t: float
+    ) -> None:
         """An agent at its goal starts work once the other is not working there; until then it waits."""
         if agent.goal in blocked:
             agent.wait += self.dt
@@ -128,8 +136,11 @@ class CollaborationTask:
                 if math.hypot(*(hand[:2] - goals[goal, :2]).tolist()) < p.position_tolerance:
                     h.state, h.goal = "waiting", goal
                 else:
-                    velocity = scene.checked(human.act({"hand_position": hand, "goal_position": goals[goal],
-                                                        "other_goals": others[goal]}), who_h, (3,))
+                    velocity = scene.checked(
+                        human.act({"hand_position": hand, "goal_position": goals[goal], "other_goals": others[goal]}),
+                        who_h,
+                        (3,),
+                    )
             if h.state == "waiting":
                 self._wait_or_work(h, "human", p.human_work_time, blocked, record, t)
             elif h.state == "working":
@@ -151,9 +162,16 @@ class CollaborationTask:
             pose = world.ee_pose()
             hand_pose = hand_pose.copy()  # a new array each tick: a robot may keep what it is given
             hand_pose[:3, 3] = hand
-            action = robot.act({"ee_pose": pose, "hand_pose": hand_pose, "hand_velocity": velocity,
-                                "goal_targets": targets, "visited": tuple(r.done_goals),
-                                "reset": idle or r.state == "idle"})
+            action = robot.act(
+                {
+                    "ee_pose": pose,
+                    "hand_pose": hand_pose,
+                    "hand_velocity": velocity,
+                    "goal_targets": targets,
+                    "visited": tuple(r.done_goals),
+                    "reset": idle or r.state == "idle",
+                }
+            )
             twist = scene.checked(action.twist, who_r, (6,))
             # Wrong-goal probability counts while the human heads for its goal: between goals the
             # belief still (rightly) names the box just finished, which says nothing of inference.
@@ -163,10 +181,13 @@ class CollaborationTask:
             # A pause entered on this tick (a replan) starts counting down on the next, like work.
             counting = r.state in ("working", "resetting", "replanning")
             if r.state == "moving":
-                reached = [g for g in range(len(goals)) if g not in r.done_goals
-                           and (action.goal is None or action.goal == g)
-                           and scene.at_goal(pose, robot_checks[g], distance=p.position_tolerance,
-                                             angle=p.angle_tolerance)]
+                reached = [
+                    g
+                    for g in range(len(goals))
+                    if g not in r.done_goals
+                    and (action.goal is None or action.goal == g)
+                    and scene.at_goal(pose, robot_checks[g], distance=p.position_tolerance, angle=p.angle_tolerance)
+                ]
                 if reached:
                     r.state, r.goal = "waiting", reached[0]
                 else:
@@ -220,8 +241,15 @@ class _Record:
     def event(self, t: float, text: str) -> None:
         self.events.append((t, text))
 
-    def tick(self, ee_pose: np.ndarray, hand: np.ndarray, human_state: str, robot_state: str,
-             belief: np.ndarray | None, human_goal: int | None) -> None:
+    def tick(
+        self,
+        ee_pose: np.ndarray,
+        hand: np.ndarray,
+        human_state: str,
+        robot_state: str,
+        belief: np.ndarray | None,
+        human_goal: int | None,
+    ) -> None:
         self.tracer.capture()
         self.ee.append(ee_pose[:3, 3].copy())
         self.hand.append(hand.copy())
@@ -241,8 +269,15 @@ class _Record:
         own = np.arange(beliefs.shape[1]) == goals[heading, None]
         return float(np.where(own, -np.inf, beliefs).max())
 
-    def rollout(self, task: CollaborationTask, completion: float, goals: np.ndarray, human_wait: float,
-                robot_wait: float, finished: bool) -> Rollout:
+    def rollout(
+        self,
+        task: CollaborationTask,
+        completion: float,
+        goals: np.ndarray,
+        human_wait: float,
+        robot_wait: float,
+        finished: bool,
+    ) -> Rollout:
         p = task.params
         ee, hand = np.array(self.ee), np.array(self.hand)
         values = {

@@ -38,6 +38,7 @@ from hritest.compiled import kernel
 GOAL_ROTATION = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 _YAW_180 = np.diag([-1.0, -1.0, 1.0])
 
+
 @dataclass(frozen=True, kw_only=True)
 class HuberConstants:
     """Huber cost-to-go constants; defaults are the reference's "assistance always on" values.
@@ -96,12 +97,22 @@ class HuberConstants:
     @cached_property
     def vector(self) -> np.ndarray:
         """Every constant in one array, in the order the kernels read them (``_A_T`` ...)."""
-        return np.array([
-            self.translation_linear, self.translation_delta, self.translation_constant,
-            self.rotation_linear, self.rotation_delta, self.rotation_constant, self.rotation_multiplier,
-            self.robot_translation_cost, self.robot_rotation_cost, self.action_apply_time,
-            self.translation_slowdown, self.rotation_slowdown,
-        ])
+        return np.array(
+            [
+                self.translation_linear,
+                self.translation_delta,
+                self.translation_constant,
+                self.rotation_linear,
+                self.rotation_delta,
+                self.rotation_constant,
+                self.rotation_multiplier,
+                self.robot_translation_cost,
+                self.robot_rotation_cost,
+                self.action_apply_time,
+                self.translation_slowdown,
+                self.rotation_slowdown,
+            ]
+        )
 
 
 DEFAULT_CONSTANTS = HuberConstants()
@@ -232,8 +243,9 @@ def _pose_offsets(pose: np.ndarray, positions: np.ndarray, quaternions: np.ndarr
 
 
 @kernel
-def _offsets(position: np.ndarray, orientation: np.ndarray, positions: np.ndarray,
-             quaternions: np.ndarray) -> np.ndarray:
+def _offsets(
+    position: np.ndarray, orientation: np.ndarray, positions: np.ndarray, quaternions: np.ndarray
+) -> np.ndarray:
     x, y, z, w = orientation
     out = np.empty((len(positions), 9))
     for t in range(len(positions)):
@@ -294,8 +306,9 @@ def _values(towards: np.ndarray, k: np.ndarray) -> np.ndarray:
     """``V_t(d) + k_r V_r(theta)`` per offset."""
     out = np.empty(len(towards))
     for t in range(len(towards)):
-        out[t] = (_huber(towards[t, DISTANCE], k[_A_T], k[_D_T], k[_C_T])
-                  + k[_K_R] * _huber(towards[t, ANGLE], k[_A_R], k[_D_R], k[_C_R]))
+        out[t] = _huber(towards[t, DISTANCE], k[_A_T], k[_D_T], k[_C_T]) + k[_K_R] * _huber(
+            towards[t, ANGLE], k[_A_R], k[_D_R], k[_C_R]
+        )
     return out
 
 
@@ -362,7 +375,7 @@ class Lookahead(NamedTuple):
 def _per_goal(values: np.ndarray, q_values: np.ndarray, per: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     best = np.empty(len(values) // per, np.intp)
     for g in range(len(best)):
-        best[g] = np.argmin(values[g * per:(g + 1) * per])
+        best[g] = np.argmin(values[g * per : (g + 1) * per])
     rows = np.arange(len(best)) * per + best
     return values[rows], q_values[rows], best
 
@@ -376,13 +389,15 @@ def lookahead(
     """The :class:`Lookahead` of holding ``twist`` at ``pose`` for ``action_apply_time``."""
     targets = _prepared(targets)
     values, q_values, after, values_after = _lookahead(
-        _pose(pose), np.asarray(twist, dtype=np.float64), targets.positions, targets.quaternions, constants.vector)
+        _pose(pose), np.asarray(twist, dtype=np.float64), targets.positions, targets.quaternions, constants.vector
+    )
     return Lookahead(targets.shape, values, q_values, after, values_after)
 
 
 @kernel
-def _lookahead(pose: np.ndarray, twist: np.ndarray, positions: np.ndarray, quaternions: np.ndarray,
-               k: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _lookahead(
+    pose: np.ndarray, twist: np.ndarray, positions: np.ndarray, quaternions: np.ndarray, k: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     orientation = _quaternion(np.ascontiguousarray(pose[:3, :3]))
     now = _offsets(pose[:3, 3].copy(), orientation, positions, quaternions)
     if twist[3] != 0.0 or twist[4] != 0.0 or twist[5] != 0.0:
@@ -513,8 +528,9 @@ def target_action(
     return _actions(towards, rows, constants.vector).reshape((*target.shape, 6))
 
 
-def goal_actions(towards: np.ndarray, target_values: np.ndarray, n_targets: int,
-                 constants: HuberConstants = DEFAULT_CONSTANTS) -> np.ndarray:
+def goal_actions(
+    towards: np.ndarray, target_values: np.ndarray, n_targets: int, constants: HuberConstants = DEFAULT_CONSTANTS
+) -> np.ndarray:
     """``(n_goals, 6)``: per goal, the :func:`target_action` toward its target of lowest value.
 
     Args:
@@ -530,7 +546,7 @@ def goal_actions(towards: np.ndarray, target_values: np.ndarray, n_targets: int,
 def _goal_actions(towards: np.ndarray, target_values: np.ndarray, per: int, k: np.ndarray) -> np.ndarray:
     best = np.empty(len(towards) // per, np.intp)
     for g in range(len(best)):
-        best[g] = g * per + np.argmin(target_values[g * per:(g + 1) * per])
+        best[g] = g * per + np.argmin(target_values[g * per : (g + 1) * per])
     return _actions(towards, best, k)
 
 
@@ -565,9 +581,7 @@ def _weighted_mean(belief: np.ndarray, actions: np.ndarray) -> np.ndarray:
     return belief @ np.ascontiguousarray(actions) / belief.sum()
 
 
-def assisted_twist_teleop(
-    belief: ArrayLike, goal_actions: ArrayLike, user_twist: ArrayLike
-) -> np.ndarray:
+def assisted_twist_teleop(belief: ArrayLike, goal_actions: ArrayLike, user_twist: ArrayLike) -> np.ndarray:
     """Teleoperation twist: belief-weighted mean of per-goal actions plus the user's twist.
 
     Args:
@@ -578,8 +592,15 @@ def assisted_twist_teleop(
     return belief_weighted_mean(belief, goal_actions) + np.asarray(user_twist)
 
 
-def teleop_step(pose: np.ndarray, user_twist: np.ndarray, targets: Targets, log_belief: np.ndarray, *,
-                max_prob: float = 0.99, constants: HuberConstants = DEFAULT_CONSTANTS) -> tuple[np.ndarray, np.ndarray]:
+def teleop_step(
+    pose: np.ndarray,
+    user_twist: np.ndarray,
+    targets: Targets,
+    log_belief: np.ndarray,
+    *,
+    max_prob: float = 0.99,
+    constants: HuberConstants = DEFAULT_CONSTANTS,
+) -> tuple[np.ndarray, np.ndarray]:
     """One tick of the teleoperation robot: the new log belief and the per-goal actions.
 
     The belief update from the user's twist (:func:`lookahead`, :meth:`Lookahead.per_goal`,
@@ -590,14 +611,29 @@ def teleop_step(pose: np.ndarray, user_twist: np.ndarray, targets: Targets, log_
         targets: ``(n_goals, n_targets)`` prepared :class:`Targets`.
         log_belief: the current ``(n_goals,)`` log belief.
     """
-    return _teleop_step(_pose(pose), np.asarray(user_twist, dtype=np.float64), targets.positions,
-                        targets.quaternions, targets.shape[-1], np.asarray(log_belief, dtype=np.float64),
-                        constants.vector, float(max_prob))
+    return _teleop_step(
+        _pose(pose),
+        np.asarray(user_twist, dtype=np.float64),
+        targets.positions,
+        targets.quaternions,
+        targets.shape[-1],
+        np.asarray(log_belief, dtype=np.float64),
+        constants.vector,
+        float(max_prob),
+    )
 
 
 @kernel
-def _teleop_step(pose: np.ndarray, user: np.ndarray, positions: np.ndarray, quaternions: np.ndarray, per: int,
-                 log_belief: np.ndarray, k: np.ndarray, max_prob: float) -> tuple[np.ndarray, np.ndarray]:
+def _teleop_step(
+    pose: np.ndarray,
+    user: np.ndarray,
+    positions: np.ndarray,
+    quaternions: np.ndarray,
+    per: int,
+    log_belief: np.ndarray,
+    k: np.ndarray,
+    max_prob: float,
+) -> tuple[np.ndarray, np.ndarray]:
     values, q_values, after, values_after = _lookahead(pose, user, positions, quaternions, k)
     goal_values, goal_q_values, _ = _per_goal(values, q_values, per)
     return _update_belief(log_belief, goal_values, goal_q_values, max_prob), _goal_actions(after, values_after, per, k)
@@ -633,9 +669,7 @@ def feasible_goal_mapping(values: ArrayLike, visited: Collection[int]) -> np.nda
     return np.array(mapping, dtype=np.intp)
 
 
-def assisted_twist_collab(
-    belief: ArrayLike, goal_actions: ArrayLike, mapping: ArrayLike
-) -> np.ndarray:
+def assisted_twist_collab(belief: ArrayLike, goal_actions: ArrayLike, mapping: ArrayLike) -> np.ndarray:
     """Collaboration twist: ``sum_i b(i) a_{m(i)} / sum b``; no user term (the human acts alone).
 
     The weight of goal ``g'`` is the total belief of human goals mapped to it, so the robot

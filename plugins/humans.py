@@ -5,9 +5,8 @@ from __future__ import annotations
 from typing import Any, ClassVar
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
-
 from hritest_plugins import mdp_human, teleop_human
+from pydantic import BaseModel, ConfigDict, Field
 
 
 class WaypointHuman:
@@ -40,8 +39,9 @@ class WaypointHuman:
         ee = np.asarray(observation["ee_position"])
         if self.path is None:
             self.path = teleop_human.waypoints(p.start, observation["goal_position"], p.waypoint_noise)
-        self.index, twist = teleop_human.user_step(self.index, self.path, ee, gain=p.gain, max_speed=p.max_command,
-                                                   weight=p.joystick_weight)
+        self.index, twist = teleop_human.user_step(
+            self.index, self.path, ee, gain=p.gain, max_speed=p.max_command, weight=p.joystick_weight
+        )
         return twist
 
 
@@ -88,5 +88,6 @@ class MdpHuman:
             others = np.asarray(other_goals, dtype=float).reshape(-1, 3)[:, :2]
             obstacles = mdp_human.obstacle_mask(self.grid, other_goals_xy=others)
             self.tables[key] = mdp_human.soft_value_iteration(
-                self.grid, obstacles, tuple(self.grid.cell_of(goal)), tau=10.0 ** self.params.log10_rationality)
+                self.grid, obstacles, tuple(self.grid.cell_of(goal)), tau=10.0**self.params.log10_rationality
+            )
         return self.tables[key]

@@ -69,9 +69,7 @@ class GridSpec:
         for lo, hi in ((self.x_min, self.x_max), (self.y_min, self.y_max)):
             n = (hi - lo) / self.cell
             if hi <= lo or abs(n - round(n)) > 1e-6:
-                raise ValueError(
-                    f"extent [{lo}, {hi}] must be a positive whole number of {self.cell} m cells"
-                )
+                raise ValueError(f"extent [{lo}, {hi}] must be a positive whole number of {self.cell} m cells")
 
     # Cached: the human locates itself on the grid every tick.
     @cached_property
@@ -243,8 +241,7 @@ def soft_value_iteration(
         raise ValueError(f"obstacles must have shape {grid.shape}, got {obstacles.shape}")
     if tau <= 0 or not 0 < gamma <= 1 or max_iter < 1:
         raise ValueError(
-            f"need tau > 0, 0 < gamma <= 1 and max_iter >= 1, "
-            f"got tau={tau}, gamma={gamma}, max_iter={max_iter}"
+            f"need tau > 0, 0 < gamma <= 1 and max_iter >= 1, got tau={tau}, gamma={gamma}, max_iter={max_iter}"
         )
     goal = (int(goal_cell[0]), int(goal_cell[1]))
     obstacles[goal] = False
@@ -262,8 +259,7 @@ def soft_value_iteration(
             break
     else:
         raise ValueIterationDiverged(
-            f"soft value iteration did not converge in {max_iter} sweeps "
-            f"(mean |dV| = {change:.3g} >= {tol})"
+            f"soft value iteration did not converge in {max_iter} sweeps (mean |dV| = {change:.3g} >= {tol})"
         )
 
     q_values = reward + gamma * values[next_flat]
@@ -333,9 +329,7 @@ def next_target(
     return grid.centre_of(nxt)
 
 
-def human_step(
-    position: ArrayLike, target: ArrayLike, speed_coeff: float = 0.5, dt: float = 0.025
-) -> np.ndarray:
+def human_step(position: ArrayLike, target: ArrayLike, speed_coeff: float = 0.5, dt: float = 0.025) -> np.ndarray:
     """One tick of human motion: the UserBot command toward ``target`` times ``speed_coeff``.
 
     The command is at most 0.25 in norm, so the human moves at most ``0.25 * speed_coeff``

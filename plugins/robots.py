@@ -12,10 +12,9 @@ from __future__ import annotations
 from typing import Any, ClassVar, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
-
-from hritest_plugins.actions import RobotAction
 from hritest_plugins import hindsight
+from hritest_plugins.actions import RobotAction
+from pydantic import BaseModel, ConfigDict, Field
 
 
 class _Params(BaseModel):
@@ -46,8 +45,9 @@ class HindsightRobot:
         targets = self.targets.of(observation["goal_targets"])
         if self.log_belief is None:
             self.log_belief = hindsight.uniform_log_belief(targets.shape[0])
-        self.log_belief, actions = hindsight.teleop_step(pose, user, targets, self.log_belief,
-                                                         max_prob=self.params.max_probability)
+        self.log_belief, actions = hindsight.teleop_step(
+            pose, user, targets, self.log_belief, max_prob=self.params.max_probability
+        )
         belief = np.exp(self.log_belief)
         return RobotAction(twist=self.combine(belief, actions, user), belief=belief, goal=int(belief.argmax()))
 
@@ -75,9 +75,10 @@ class BlendRobot(HindsightRobot):
 
 class _CollabParams(_Params):
     inference_twist_scale: float = Field(
-        0.4, gt=0,
+        0.4,
+        gt=0,
         description="observed hand velocity x this = the twist the belief update assumes; 0.4 = the "
-                    "reference's 0.2 joystick weight over its 0.5 default human speed",
+        "reference's 0.2 joystick weight over its 0.5 default human speed",
     )
 
 
@@ -117,11 +118,13 @@ class CollabRobot:
             twist = np.zeros(6)
             twist[:3] = self.params.inference_twist_scale * np.asarray(observation["hand_velocity"])
             values, q_values = self.hand_values(targets, np.asarray(observation["hand_pose"], dtype=float), twist)
-            self.log_belief = hindsight.update_belief(self.log_belief, values, q_values,
-                                                      max_prob=self.params.max_probability)
+            self.log_belief = hindsight.update_belief(
+                self.log_belief, values, q_values, max_prob=self.params.max_probability
+            )
         belief = np.exp(self.log_belief)
-        mapping, actions = self.plan(targets, np.asarray(observation["ee_pose"], dtype=float),
-                                     tuple(observation.get("visited", ())))
+        mapping, actions = self.plan(
+            targets, np.asarray(observation["ee_pose"], dtype=float), tuple(observation.get("visited", ()))
+        )
         twist = hindsight.belief_weighted_mean(belief, actions)
         return RobotAction(twist=twist, belief=belief, goal=mapping[int(belief.argmax())])
 

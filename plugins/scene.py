@@ -5,9 +5,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from hritest_plugins import hindsight
 
 from hritest.scenario import Scenario
-from hritest_plugins import hindsight
+
 
 def goal_targets(scenario: Scenario, names: list[str]) -> np.ndarray:
     """``(goals, 2, 4, 4)``: each goal's two target end-effector poses, read-only.

@@ -12,12 +12,12 @@ import math
 from typing import ClassVar
 
 import numpy as np
+from hritest_plugins import hindsight, scene
 from pydantic import BaseModel, ConfigDict, Field
 
 from hritest import metrics
 from hritest.protocols import HumanPolicy, RobotPolicy, Rollout, TaskContext
 from hritest.sim import shared_world
-from hritest_plugins import hindsight, scene
 
 
 class SharedControlTask:
@@ -30,7 +30,10 @@ class SharedControlTask:
 
     kind: ClassVar[str] = "task"
     metrics: ClassVar[tuple[str, ...]] = (
-        "completion_time", "min_goal_distance", "human_variation", "max_wrong_goal_probability",
+        "completion_time",
+        "min_goal_distance",
+        "human_variation",
+        "max_wrong_goal_probability",
         "robot_path_length",
     )
     grids: ClassVar[dict[str, tuple[int, int]]] = {"robot": (32, 32)}
@@ -48,8 +51,7 @@ class SharedControlTask:
         self.scenario = context.scenario
         self.goal_names = list(context.scenario.objects)
         if params.true_goal not in self.goal_names:
-            raise ValueError(f"task.params.true_goal {params.true_goal!r} is not one of the objects "
-                             f"{self.goal_names}")
+            raise ValueError(f"task.params.true_goal {params.true_goal!r} is not one of the objects {self.goal_names}")
         if context.world is None:
             raise ValueError("the shared control task needs a world: give the spec a workspace or world.arm")
         self.dt = context.dt
@@ -100,7 +102,8 @@ class SharedControlTask:
             metrics=values,
             trajectories={"robot/ee": ee_array},
             series={f"belief/{name}": belief[:, i] for i, name in enumerate(self.goal_names)}
-            if belief is not None else {},
+            if belief is not None
+            else {},
             events=events,
             grids={"robot": metrics.occupancy_grid(ee_array, x=p.occupancy_x, y=p.occupancy_y)},
             scene=tracer.finish(),

@@ -49,9 +49,7 @@ def waypoints(start_xy: ArrayLike, goal_xy: ArrayLike, noise: ArrayLike) -> np.n
     return points
 
 
-def user_velocity(
-    current: ArrayLike, target: ArrayLike, *, gain: float = 10.0, max_speed: float = 0.25
-) -> np.ndarray:
+def user_velocity(current: ArrayLike, target: ArrayLike, *, gain: float = 10.0, max_speed: float = 0.25) -> np.ndarray:
     """The UserBot command: ``gain * (target - current)`` in x-y, clipped to norm ``max_speed``.
 
     A saturated proportional controller: full command far from the target, a smooth stop near
@@ -100,8 +98,9 @@ def next_waypoint_index(
         ``index + 1`` or ``index``.
     """
     vx, vy = np.asarray(velocity, dtype=np.float64)[:2].tolist()
-    return _next_index(int(index), np.asarray(path, dtype=np.float64), float(np.asarray(ee_xy)[0]), vx, vy,
-                       float(min_command))
+    return _next_index(
+        int(index), np.asarray(path, dtype=np.float64), float(np.asarray(ee_xy)[0]), vx, vy, float(min_command)
+    )
 
 
 @kernel
@@ -124,20 +123,21 @@ def user_twist(velocity: ArrayLike, *, weight: float = 0.2) -> np.ndarray:
     return np.array([weight * vx, weight * vy, 0.0, 0.0, 0.0, 0.0])
 
 
-def user_step(index: int, path: np.ndarray, ee: np.ndarray, *, gain: float, max_speed: float,
-              weight: float) -> tuple[int, np.ndarray]:
+def user_step(
+    index: int, path: np.ndarray, ee: np.ndarray, *, gain: float, max_speed: float, weight: float
+) -> tuple[int, np.ndarray]:
     """One tick of the user: ``(next waypoint index, twist)``.
 
     :func:`user_velocity` toward ``path[index]``, :func:`next_waypoint_index` and
     :func:`user_twist` in one compiled call, made every tick of a teleoperation episode.
     """
-    return _user_step(int(index), path, np.asarray(ee, dtype=np.float64), float(gain), float(max_speed),
-                      float(weight))
+    return _user_step(int(index), path, np.asarray(ee, dtype=np.float64), float(gain), float(max_speed), float(weight))
 
 
 @kernel
-def _user_step(index: int, path: np.ndarray, ee: np.ndarray, gain: float, max_speed: float,
-               weight: float) -> tuple[int, np.ndarray]:
+def _user_step(
+    index: int, path: np.ndarray, ee: np.ndarray, gain: float, max_speed: float, weight: float
+) -> tuple[int, np.ndarray]:
     vx, vy = _velocity(path[index, 0], path[index, 1], ee[0], ee[1], gain, max_speed)
     twist = np.zeros(6)
     twist[0], twist[1] = weight * vx, weight * vy

@@ -35,8 +35,11 @@ def main() -> int:
     parser.add_argument("out", type=Path)
     parser.add_argument("--wait", type=float, default=45.0, help="seconds for the viewer to load and draw")
     parser.add_argument("--size", default="1600,1000", help="window WIDTH,HEIGHT")
-    parser.add_argument("--rerun", default=str(Path(__file__).resolve().parent.parent / ".venv/bin/rerun"),
-                        help="the rerun executable (default: the repository's .venv)")
+    parser.add_argument(
+        "--rerun",
+        default=str(Path(__file__).resolve().parent.parent / ".venv/bin/rerun"),
+        help="the rerun executable (default: the repository's .venv)",
+    )
     args = parser.parse_args()
     try:
         from playwright.sync_api import sync_playwright
@@ -48,16 +51,26 @@ def main() -> int:
         print(f"need Chromium (apt-get install -y chromium) and a recording; got {args.recording}", file=sys.stderr)
         return 2
     web, grpc = free_port(), free_port()
-    viewer = subprocess.Popen([args.rerun, str(args.recording), "--serve-web", "--web-viewer-port", str(web),
-                               "--port", str(grpc)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                              start_new_session=True)  # .venv/bin/rerun is a wrapper: stop its whole group
+    viewer = subprocess.Popen(
+        [args.rerun, str(args.recording), "--serve-web", "--web-viewer-port", str(web), "--port", str(grpc)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )  # .venv/bin/rerun is a wrapper: stop its whole group
     try:
         time.sleep(3)
         url = f"http://127.0.0.1:{web}/?url={quote(f'rerun+http://localhost:{grpc}/proxy', safe='')}"
         width, height = map(int, args.size.split(","))
         with sync_playwright() as playwright:
-            chromium = playwright.chromium.launch(executable_path=browser, args=[
-                "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--ignore-gpu-blocklist"])
+            chromium = playwright.chromium.launch(
+                executable_path=browser,
+                args=[
+                    "--no-sandbox",
+                    "--use-angle=swiftshader",
+                    "--enable-unsafe-swiftshader",
+                    "--ignore-gpu-blocklist",
+                ],
+            )
             page = chromium.new_page(viewport={"width": width, "height": height})
             page.goto(url)
             time.sleep(args.wait)

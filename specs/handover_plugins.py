@@ -89,8 +89,10 @@ def person_model(path: str, body: str, head: str) -> PersonModel:
         raise ValueError(f"the world model {path} has no body named {body!r} (task.params.person_body)")
     turned = [a for a in ("quat", "euler", "axisangle", "xyaxes", "zaxis") if a in element.attrib]
     if turned:
-        raise ValueError(f"body {body!r} of {path} sets {', '.join(turned)}; leave it unturned (it faces its -x "
-                         "axis) and turn it with a person.yaw parameter instead")
+        raise ValueError(
+            f"body {body!r} of {path} sets {', '.join(turned)}; leave it unturned (it faces its -x "
+            "axis) and turn it with a person.yaw parameter instead"
+        )
     geom = next((g for g in element.iter("geom") if g.get("name") == head), None)
     if geom is None:
         raise ValueError(f"body {body!r} of {path} has no geom named {head!r} (task.params.head_geom)")
@@ -117,18 +119,27 @@ class HandoverTask:
 
     kind: ClassVar[str] = "task"
     metrics: ClassVar[tuple[str, ...]] = (
-        "handover_time", "reached", "min_head_distance", "hand_wait_time", "withdrawals", "person_distance",
-        "reach_distance", "min_ee_hand_distance", "robot_path_length",
+        "handover_time",
+        "reached",
+        "min_head_distance",
+        "hand_wait_time",
+        "withdrawals",
+        "person_distance",
+        "reach_distance",
+        "min_ee_hand_distance",
+        "robot_path_length",
     )
     grids: ClassVar[dict[str, tuple[int, int]]] = {"robot": (32, 32), "human": (32, 32)}
 
     class Params(BaseModel):
         model_config = ConfigDict(extra="forbid", frozen=True)
-        handover_distance: float = Field(0.05, gt=0, le=0.3,
-                                         description="m between end effector and hand that counts as a handover")
+        handover_distance: float = Field(
+            0.05, gt=0, le=0.3, description="m between end effector and hand that counts as a handover"
+        )
         hand_rest: tuple[float, float, float] = Field(
-            (0.04, 0.22, 0.88), description="where the hand hangs at rest: m forward, right and up from the "
-                                            "person's body origin")
+            (0.04, 0.22, 0.88),
+            description="where the hand hangs at rest: m forward, right and up from the person's body origin",
+        )
         person_body: str = Field("person", description="the person's body in the world model")
         head_geom: str = Field("head", description="the person's head geom (a child of person_body)")
 
@@ -185,10 +196,18 @@ class HandoverTask:
                 break
             if tick == self.ticks:
                 break
-            command = human.act({
-                "time": t, "dt": dt, "hand_position": hand, "hand_rest": self.rest, "person_position": self.person,
-                "person_forward": self.forward, "person_right": self.right, "ee_position": ee,
-            })
+            command = human.act(
+                {
+                    "time": t,
+                    "dt": dt,
+                    "hand_position": hand,
+                    "hand_rest": self.rest,
+                    "person_position": self.person,
+                    "person_forward": self.forward,
+                    "person_right": self.right,
+                    "ee_position": ee,
+                }
+            )
             new_state = str(command.state)
             if new_state != human_state:
                 if new_state == "reaching":
@@ -205,11 +224,20 @@ class HandoverTask:
                     reach_end = hand
             human_state, out = new_state, bool(command.out)
             wait_ticks += human_state == "holding"
-            action = robot.act({
-                "time": t, "dt": dt, "ee_position": ee, "ee_pose": pose, "hand_position": hand,
-                "hand_velocity": velocity, "person_position": self.person, "person_forward": self.forward,
-                "head_position": self.head, "arm_mount": self.mount,
-            })
+            action = robot.act(
+                {
+                    "time": t,
+                    "dt": dt,
+                    "ee_position": ee,
+                    "ee_pose": pose,
+                    "hand_position": hand,
+                    "hand_velocity": velocity,
+                    "person_position": self.person,
+                    "person_forward": self.forward,
+                    "head_position": self.head,
+                    "arm_mount": self.mount,
+                }
+            )
             robot_mode = str(action.mode)
             twist = np.asarray(action.twist, dtype=float)
             if twist.any():  # a still arm needs no step (and the controller's solve is most of a tick)
@@ -276,10 +304,12 @@ class ReachingRobot:
         max_speed: float = Field(0.25, gt=0, le=1.0, description="m/s: the end effector's speed cap")
         gain: float = Field(2.5, gt=0, description="1/s: speed per metre of distance to the target")
         lookahead: float = Field(0.25, ge=0, le=2.0, description="s the hand's motion is extrapolated")
-        offer_distance: float = Field(0.15, gt=0, description="m in front of the person's body a hand counts as "
-                                                             "offered")
-        withdraw_speed: float = Field(0.05, ge=0, description="m/s towards the body at which a hand counts as "
-                                                              "drawn back")
+        offer_distance: float = Field(
+            0.15, gt=0, description="m in front of the person's body a hand counts as offered"
+        )
+        withdraw_speed: float = Field(
+            0.05, ge=0, description="m/s towards the body at which a hand counts as drawn back"
+        )
         retreat: bool = Field(True, description="go back to the start while no hand is offered (else hold still)")
         head_stop: float = Field(0.2, ge=0, description="m from the head's centre where approaching stops")
         head_slow: float = Field(0.25, gt=0, description="m before head_stop over which the robot slows")
@@ -289,8 +319,12 @@ class ReachingRobot:
         turn_gain: float = Field(2.0, ge=0, description="1/s: tool yaw rate per radian it is turned off the target")
         max_turn: float = Field(0.8, gt=0, description="rad/s: the tool's yaw rate cap")
         settled: float = Field(0.005, ge=0, description="m from the target at which the robot stops moving")
-        stall_progress: float = Field(0.25, ge=0, le=1, description="fraction of the step asked that, not made "
-                                                                    "good towards a still hand, stalls the arm")
+        stall_progress: float = Field(
+            0.25,
+            ge=0,
+            le=1,
+            description="fraction of the step asked that, not made good towards a still hand, stalls the arm",
+        )
         stall_resume: float = Field(0.02, gt=0, description="m the target must move for a stalled arm to go on")
 
     def __init__(self, *, params: ReachingRobot.Params, scenario: Scenario, rng: np.random.Generator) -> None:
@@ -379,8 +413,9 @@ class ReachingPerson:
     class Params(BaseModel):
         model_config = ConfigDict(extra="forbid", frozen=True)
         reaction_delay: float = Field(0.5, ge=0, le=10, description="s before the person first reaches out")
-        patience: float = Field(3.0, gt=0, le=30, description="s the hand is held out at the spot before "
-                                                              "it is withdrawn")
+        patience: float = Field(
+            3.0, gt=0, le=30, description="s the hand is held out at the spot before it is withdrawn"
+        )
         reach_speed: float = Field(0.5, gt=0, le=2.0, description="m/s of the hand")
         spot_forward: float = Field(0.4, ge=0.1, le=0.7, description="m in front of the body the hand is held")
         spot_right: float = Field(0.1, ge=-0.4, le=0.4, description="m to the person's right of the body axis")
@@ -422,8 +457,11 @@ class ReachingPerson:
 
     def _reach(self, observation: Observation, t: float) -> None:
         p = self.params
-        spot = (observation["person_position"] + p.spot_forward * observation["person_forward"]
-                + p.spot_right * observation["person_right"])
+        spot = (
+            observation["person_position"]
+            + p.spot_forward * observation["person_forward"]
+            + p.spot_right * observation["person_right"]
+        )
         spot = np.array([spot[0], spot[1], p.spot_height]) + self.rng.normal(0.0, p.jitter, 3)
         self.attempts += 1
         self.state, self.since, self.target = "reaching", t, spot

@@ -28,20 +28,39 @@ def test_a_ready_spec_passes(toy_spec):
     assert "one scenario takes" in result.output
 
 
-@pytest.mark.parametrize(("old", "new", "check", "words"), [
-    # A declared metric never reported.
-    ('"human_variation": variation}', "}", "metric_error",
-     ["ToyTask (", "toy_plugins.py:", "declares metric 'human_variation' but its Rollout.metrics lacks it"]),
-    # A grid of the wrong shape.
-    ("grids: ClassVar[dict[str, tuple[int, int]]] = {}", 'grids = {"robot": (32, 32)}', "plugin_error",
-     ["toy_plugins.py:", "declares grids ['robot'] but returned []"]),
-    # Randomness from outside the given rng.
-    ("distance = float(np.linalg.norm(g0 - g1))", "distance = float(np.linalg.norm(g0 - g1)) + np.random.rand()",
-     "determinism", ["draw every random number from the rng"]),
-    # A crash, blamed on the plugin.
-    ("        if self.params.delay:", "        if self.params.delay or True:\n            raise KeyError('speed')\n"
-     "        if self.params.delay:", "plugin_error", ["task plugin ToyTask raised KeyError"]),
-])
+@pytest.mark.parametrize(
+    ("old", "new", "check", "words"),
+    [
+        # A declared metric never reported.
+        (
+            '"human_variation": variation,',
+            "",
+            "metric_error",
+            ["ToyTask (", "toy_plugins.py:", "declares metric 'human_variation' but its Rollout.metrics lacks it"],
+        ),
+        # A grid of the wrong shape.
+        (
+            "grids: ClassVar[dict[str, tuple[int, int]]] = {}",
+            'grids = {"robot": (32, 32)}',
+            "plugin_error",
+            ["toy_plugins.py:", "declares grids ['robot'] but returned []"],
+        ),
+        # Randomness from outside the given rng.
+        (
+            "distance = float(np.linalg.norm(g0 - g1))",
+            "distance = float(np.linalg.norm(g0 - g1)) + np.random.rand()",
+            "determinism",
+            ["draw every random number from the rng"],
+        ),
+        # A crash, blamed on the plugin.
+        (
+            "        if self.params.delay:",
+            "        if self.params.delay or True:\n            raise KeyError('speed')\n        if self.params.delay:",
+            "plugin_error",
+            ["task plugin ToyTask raised KeyError"],
+        ),
+    ],
+)
 def test_each_broken_promise_is_a_finding(toy_spec, tmp_path, old, new, check, words):
     report = check_spec(broken_toy(toy_spec, tmp_path, old, new))
     assert not report.ok
@@ -52,23 +71,28 @@ def test_each_broken_promise_is_a_finding(toy_spec, tmp_path, old, new, check, w
 
 
 def test_grid_shapes_are_checked_per_grid(toy_spec, tmp_path):
-    spec = broken_toy(toy_spec, tmp_path, "trajectories={\"robot\": path},",
-                      "trajectories={\"robot\": path}, grids={\"robot\": np.ones((16, 16)) / 256},")
+    spec = broken_toy(
+        toy_spec,
+        tmp_path,
+        'trajectories={"robot": path},',
+        'trajectories={"robot": path}, grids={"robot": np.ones((16, 16)) / 256},',
+    )
     plugins = tmp_path / "toy_plugins.py"
-    plugins.write_text(plugins.read_text().replace("grids: ClassVar[dict[str, tuple[int, int]]] = {}",
-                                                   'grids = {"robot": (32, 32)}'))
+    plugins.write_text(
+        plugins.read_text().replace("grids: ClassVar[dict[str, tuple[int, int]]] = {}", 'grids = {"robot": (32, 32)}')
+    )
     report = check_spec(spec)
     assert any("grid 'robot' has shape (16, 16), declared (32, 32)" in f.message for f in report.findings)
 
 
 def test_a_finding_of_every_scenario_is_printed_once_with_all_of_them(toy_spec, tmp_path):
-    report = check_spec(broken_toy(toy_spec, tmp_path, '"human_variation": variation}', "}"), scenarios=2)
+    report = check_spec(broken_toy(toy_spec, tmp_path, '"human_variation": variation,', ""), scenarios=2)
     assert len(report.findings) == 1
     assert report.findings[0].scenario == "nominal scenario, random scenario 1, random scenario 2"
 
 
 def test_findings_exit_2_and_a_spec_that_does_not_compile_too(toy_spec, tmp_path):
-    spec = broken_toy(toy_spec, tmp_path, '"human_variation": variation}', "}")
+    spec = broken_toy(toy_spec, tmp_path, '"human_variation": variation,', "")
     result = runner.invoke(app, ["check", str(spec)])
     assert result.exit_code == 2 and "[metric_error] nominal scenario" in result.output
     result = runner.invoke(app, ["check", str(toy_spec("bind: task.g1x", "bind: task.g9x"))])

@@ -46,26 +46,36 @@ def test_the_task_gets_a_context_never_the_spec(domain):
 def test_nominal_theta_is_the_specs_own_values(toy_spec):
     # Plugin defaults for task params, the middle of the bounds for the noise (its default [0, 0, 0]
     # happens to be that too), and an explicit nominal where given.
-    domain = compile_spec(load_spec(toy_spec("bind: task.g1y, bounds: [-0.08, 0.18]}",
-                                             "bind: task.g1y, bounds: [-0.08, 0.18], nominal: 0.1}")))
+    domain = compile_spec(
+        load_spec(
+            toy_spec("bind: task.g1y, bounds: [-0.08, 0.18]}", "bind: task.g1y, bounds: [-0.08, 0.18], nominal: 0.1}")
+        )
+    )
     np.testing.assert_array_equal(domain.nominal, [0.6, 0.05, 0.6, 0.1, 0, 0, 0])
 
 
 def test_a_nominal_outside_the_bounds_is_an_error(toy_spec):
     with pytest.raises(SpecError, match=r"parameters\[3\].*outside the bounds"):
-        load_spec(toy_spec("bind: task.g1y, bounds: [-0.08, 0.18]}", "bind: task.g1y, bounds: [-0.08, 0.18], nominal: 1}"))
+        load_spec(
+            toy_spec("bind: task.g1y, bounds: [-0.08, 0.18]}", "bind: task.g1y, bounds: [-0.08, 0.18], nominal: 1}")
+        )
 
 
 def test_bounds_the_plugin_rejects_are_an_error_at_compile_time(toy_spec, tmp_path):
     plugins = tmp_path / "toy_plugins.py"
-    plugins.write_text(plugins.read_text().replace("g1y: float = 0.05", "g1y: float = Field(0.05, ge=0)").replace(
-        "from pydantic import BaseModel, ConfigDict", "from pydantic import BaseModel, ConfigDict, Field"))
+    plugins.write_text(
+        plugins.read_text()
+        .replace("g1y: float = 0.05", "g1y: float = Field(0.05, ge=0)")
+        .replace("from pydantic import BaseModel, ConfigDict", "from pydantic import BaseModel, ConfigDict, Field")
+    )
     with pytest.raises(SpecError, match=r"parameters\[3\]\.bounds.*ToyTask.Params rejects g1y = -0.08"):
         compile_spec(load_spec(toy_spec()))
 
 
 def test_repair_keeps_theta_within_the_bounds_without_a_bounds_constraint(toy_spec):
-    domain = compile_spec(load_spec(toy_spec("constraints:\n  - {type: bounds, groups: [[g0x, g1x], [g0y, g1y], [noise]]}\n", "")))
+    domain = compile_spec(
+        load_spec(toy_spec("constraints:\n  - {type: bounds, groups: [[g0x, g1x], [g0y, g1y], [noise]]}\n", ""))
+    )
     repaired = domain.repair(np.array([0.9, 0.05, 0.6, 0.05, 0.2, 0, 0]))
     np.testing.assert_array_equal(repaired.theta, [0.68, 0.05, 0.6, 0.05, 0.05, 0, 0])
 
@@ -93,11 +103,14 @@ def test_objects_and_the_arm_are_placed_in_the_tasks_world(toy_spec):
     assert domain.world.arm.base == (0.409, 0.338, 0.795)  # the domain's own layout is untouched
 
 
-@pytest.mark.parametrize(("old", "new", "words"), [
-    ("bind: box.z", "bind: box.yaw", ["box.x, box.y, box.z", "not 'box.yaw'"]),
-    ("bind: arm.x", "bind: arm.start", ["arm.start needs one angle per arm joint: set size: 6"]),
-    ("bind: arm.x", "bind: door.x", ["unknown target 'door'", "world.model"]),
-])
+@pytest.mark.parametrize(
+    ("old", "new", "words"),
+    [
+        ("bind: box.z", "bind: box.yaw", ["box.x, box.y, box.z", "not 'box.yaw'"]),
+        ("bind: arm.x", "bind: arm.start", ["arm.start needs one angle per arm joint: set size: 6"]),
+        ("bind: arm.x", "bind: door.x", ["unknown target 'door'", "world.model"]),
+    ],
+)
 def test_world_bindings_are_checked(toy_spec, old, new, words):
     with pytest.raises(SpecError) as caught:
         compile_spec(load_spec(toy_spec("parameters:\n", PLACED.replace(old, new))))
@@ -107,9 +120,14 @@ def test_world_bindings_are_checked(toy_spec, old, new, words):
 
 def test_a_task_written_for_hritest_0_1_gets_a_migration_message(toy_spec, tmp_path):
     plugins = tmp_path / "toy_plugins.py"
-    plugins.write_text(plugins.read_text().replace(
-        "def __init__(self, *, context: TaskContext) -> None:", "def __init__(self, *, params, scenario, spec) -> None:"
-    ).replace("grids: ClassVar[dict[str, tuple[int, int]]] = {}", 'agents = ("robot",)'))
+    plugins.write_text(
+        plugins.read_text()
+        .replace(
+            "def __init__(self, *, context: TaskContext) -> None:",
+            "def __init__(self, *, params, scenario, spec) -> None:",
+        )
+        .replace("grids: ClassVar[dict[str, tuple[int, int]]] = {}", 'agents = ("robot",)')
+    )
     with pytest.raises(SpecError) as caught:
         compile_spec(load_spec(toy_spec()))
     text = str(caught.value)
@@ -136,8 +154,10 @@ ROOM = """<mujoco><worldbody>
 
 def test_bodies_of_a_world_model_are_bound_by_name(toy_spec, tmp_path):
     (tmp_path / "room.xml").write_text(ROOM)
-    spec = toy_spec("parameters:\n", "world:\n  model: room.xml\nparameters:\n"
-                    "  - {name: door_x, bind: door.x, bounds: [0.5, 1.5], nominal: 1.0}\n")
+    spec = toy_spec(
+        "parameters:\n",
+        "world:\n  model: room.xml\nparameters:\n  - {name: door_x, bind: door.x, bounds: [0.5, 1.5], nominal: 1.0}\n",
+    )
     domain = compile_spec(load_spec(spec))
     assert domain.world.model == str(tmp_path / "room.xml") and domain.world.arm is None
     world = domain.context(domain.space.bind(np.r_[1.25, domain.nominal[1:]])).world
@@ -146,8 +166,10 @@ def test_bodies_of_a_world_model_are_bound_by_name(toy_spec, tmp_path):
 
 def test_an_unknown_body_of_the_world_model_is_named_with_the_known_ones(toy_spec, tmp_path):
     (tmp_path / "room.xml").write_text(ROOM)
-    spec = toy_spec("parameters:\n", "world:\n  model: room.xml\nparameters:\n"
-                    "  - {name: window_x, bind: window.x, bounds: [0.5, 1.5]}\n")
+    spec = toy_spec(
+        "parameters:\n",
+        "world:\n  model: room.xml\nparameters:\n  - {name: window_x, bind: window.x, bounds: [0.5, 1.5]}\n",
+    )
     with pytest.raises(SpecError) as caught:
         compile_spec(load_spec(spec))
     text = str(caught.value)

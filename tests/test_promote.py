@@ -28,8 +28,14 @@ def run(tmp_path_factory) -> Path:
     (folder / "specs").mkdir()
     shutil.copy(FIXTURES / "toy_plugins.py", folder / "specs" / "toy_plugins.py")
     shutil.copy(FIXTURES / "toy.yaml", folder / "specs" / "toy.yaml")
-    qd.start(spec_file=folder / "specs" / "toy.yaml", out=folder / "run", algorithm="random", budget=120, seed=4,
-             backend=qd.Backend(workers=1))
+    qd.start(
+        spec_file=folder / "specs" / "toy.yaml",
+        out=folder / "run",
+        algorithm="random",
+        budget=120,
+        seed=4,
+        backend=qd.Backend(workers=1),
+    )
     return folder / "run"
 
 
@@ -122,8 +128,10 @@ def test_promoted_failures_replay_under_pytest_as_open_failures(run, pytester):
     result.stdout.fnmatch_lines(["corpus tests/hri_failures: 0 regressions, 3 still failing, 0 now passing, 0 stale"])
 
 
-@pytest.mark.parametrize("case", ["not-a-run", "missing", "unwritable", "unknown-id", "nothing", "top-0",
-                                  "spec-changed", "mark-fixed-as-run"])
+@pytest.mark.parametrize(
+    "case",
+    ["not-a-run", "missing", "unwritable", "unknown-id", "nothing", "top-0", "spec-changed", "mark-fixed-as-run"],
+)
 def test_bad_input_exits_2_and_writes_nothing(run, tmp_path, case):
     corpus = tmp_path / "corpus"
     plain = tmp_path / "plain"

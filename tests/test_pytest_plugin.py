@@ -77,17 +77,29 @@ class Project:
         name = load_spec(spec).name
         path = self.corpus / name / f"{scenario[:12]}.yaml"
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(dump_entry({
-            "format": 1, "status": status,
-            "spec": str(Path("..", "..", "..", "specs", spec.name)) if self.corpus.parent.name == "tests"
-            else str(spec.resolve()),
-            "spec_name": name, "spec_digest": spec_digest, "failure_condition": "objective >= 8", "seed": seed,
-            "objective": evaluation.objective,
-            "measures": {m.name: float(v) for m, v in zip(self.recorder.measures, evaluation.measures)},
-            "theta": dict(zip(labels, theta)), "theta_repaired": dict(zip(labels, evaluation.theta_repaired.tolist())),
-            "metrics": evaluation.metrics, "scenario_digest": scenario,
-            "versions": {"hritest": "0.1.0"}, "origin": {"run": "runs/toy", "evaluation": 7},
-        }))
+        path.write_text(
+            dump_entry(
+                {
+                    "format": 1,
+                    "status": status,
+                    "spec": str(Path("..", "..", "..", "specs", spec.name))
+                    if self.corpus.parent.name == "tests"
+                    else str(spec.resolve()),
+                    "spec_name": name,
+                    "spec_digest": spec_digest,
+                    "failure_condition": "objective >= 8",
+                    "seed": seed,
+                    "objective": evaluation.objective,
+                    "measures": {m.name: float(v) for m, v in zip(self.recorder.measures, evaluation.measures)},
+                    "theta": dict(zip(labels, theta)),
+                    "theta_repaired": dict(zip(labels, evaluation.theta_repaired.tolist())),
+                    "metrics": evaluation.metrics,
+                    "scenario_digest": scenario,
+                    "versions": {"hritest": "0.1.0"},
+                    "origin": {"run": "runs/toy", "evaluation": 7},
+                }
+            )
+        )
         return path
 
 
@@ -105,8 +117,22 @@ def entry_id(path: Path) -> str:
 
 def test_the_plugin_is_registered_and_imports_nothing_heavy():
     assert "hritest.pytest_plugin" in {ep.value for ep in entry_points(group="pytest11")}
-    heavy = ["torch", "mujoco", "ribs", "ortools", "rerun", "numpy", "pydantic", "hritest.domain",
-             "hritest.evaluate", "hritest.replay", "hritest.rundir", "hritest.search", "hritest.sim", "hritest.spec"]
+    heavy = [
+        "torch",
+        "mujoco",
+        "ribs",
+        "ortools",
+        "rerun",
+        "numpy",
+        "pydantic",
+        "hritest.domain",
+        "hritest.evaluate",
+        "hritest.replay",
+        "hritest.rundir",
+        "hritest.search",
+        "hritest.sim",
+        "hritest.spec",
+    ]
     code = f"import sys, hritest.pytest_plugin; print(sorted(m for m in {heavy!r} if m in sys.modules))"
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert done.stdout.strip() == "[]", f"imported at plugin import time: {done.stdout}"
@@ -132,24 +158,28 @@ def test_fixed_passing_regressed_still_failing_and_now_passing(project):
     result = project.pytester.runpytest("-rA")
     result.assert_outcomes(passed=1, failed=1, xfailed=1, xpassed=1)
     assert result.ret == pytest.ExitCode.TESTS_FAILED
-    result.stdout.fnmatch_lines([
-        "hritest: failure corpus tests/hri_failures (4 entries)",
-        "*= hritest =*",
-        "corpus tests/hri_failures: 1 regression, 1 still failing, 1 now passing, 0 stale, 1 passing",
-        f"REGRESSION  {entry_id(regressed)}  (*)",
-        "now passing (open failures that no longer fail):",
-        f"  {entry_id(now_ok)}  (*)",
-        f"mark them fixed: hritest promote --to tests/hri_failures --mark-fixed {entry_id(now_ok)}",
-    ])
+    result.stdout.fnmatch_lines(
+        [
+            "hritest: failure corpus tests/hri_failures (4 entries)",
+            "*= hritest =*",
+            "corpus tests/hri_failures: 1 regression, 1 still failing, 1 now passing, 0 stale, 1 passing",
+            f"REGRESSION  {entry_id(regressed)}  (*)",
+            "now passing (open failures that no longer fail):",
+            f"  {entry_id(now_ok)}  (*)",
+            f"mark them fixed: hritest promote --to tests/hri_failures --mark-fixed {entry_id(now_ok)}",
+        ]
+    )
     # The regression's report: what it was and what it is now, and how to replay it.
-    result.stdout.fnmatch_lines([
-        f"*hritest {entry_id(regressed)} was marked fixed but fails again: 'objective >= 8' holds",
-        "*recorded*now",
-        "*objective*10*9.4*",
-        "*goal_distance*",
-        f"corpus file: tests/hri_failures/toy/{regressed.name}",
-        "replay it: hritest replay specs/toy.yaml --seed 0 --theta 0.6,0.05,0.6,0.05,0.05,0.05,0.05",
-    ])
+    result.stdout.fnmatch_lines(
+        [
+            f"*hritest {entry_id(regressed)} was marked fixed but fails again: 'objective >= 8' holds",
+            "*recorded*now",
+            "*objective*10*9.4*",
+            "*goal_distance*",
+            f"corpus file: tests/hri_failures/toy/{regressed.name}",
+            "replay it: hritest replay specs/toy.yaml --seed 0 --theta 0.6,0.05,0.6,0.05,0.05,0.05,0.05",
+        ]
+    )
     result.stdout.fnmatch_lines([f"XFAIL *{still.name}::toy::{still.stem} - hritest open failure still fails*"])
     result.stdout.fnmatch_lines([f"XPASS *{now_ok.name}::toy::{now_ok.stem}*no longer fails*"])
     # The now-passing entry's report section says how to mark it fixed; nothing was changed.
@@ -184,21 +214,24 @@ def test_an_entry_whose_spec_changed_is_skipped_as_stale(project):
     entry = project.record(FAILS_WHEN_FIXED[0], status="fixed")
     spec = project.specs / "toy.yaml"
     spec.write_text(spec.read_text().replace("failure: objective >= 8", "failure: objective >= 9"))
-    (project.corpus / "toy" / "gone.yaml").write_text(entry.read_text().replace("spec: ../../../specs/toy.yaml",
-                                                                                 "spec: ../../../specs/gone.yaml"))
+    (project.corpus / "toy" / "gone.yaml").write_text(
+        entry.read_text().replace("spec: ../../../specs/toy.yaml", "spec: ../../../specs/gone.yaml")
+    )
     result = project.pytester.runpytest("-rs")
     result.assert_outcomes(skipped=2)
     assert result.ret == pytest.ExitCode.OK
-    result.stdout.fnmatch_lines([
-        "corpus tests/hri_failures: 0 regressions, 0 still failing, 0 now passing, 2 stale",
-        f"stale       {entry_id(entry)}  (its spec changed or is gone; *)",
-        "stale       toy/gone  (its spec changed or is gone; *)",
-        f"SKIPPED * tests/hri_failures/toy/{entry.name}: hritest stale: specs/toy.yaml changed since "
-        f"{entry_id(entry)} was recorded (spec digest * then, * now); search again and promote, or delete "
-        f"tests/hri_failures/toy/{entry.name}",
-        "SKIPPED * tests/hri_failures/toy/gone.yaml: hritest stale: its spec specs/gone.yaml no longer exists; "
-        "restore it, or delete tests/hri_failures/toy/gone.yaml",
-    ])
+    result.stdout.fnmatch_lines(
+        [
+            "corpus tests/hri_failures: 0 regressions, 0 still failing, 0 now passing, 2 stale",
+            f"stale       {entry_id(entry)}  (its spec changed or is gone; *)",
+            "stale       toy/gone  (its spec changed or is gone; *)",
+            f"SKIPPED * tests/hri_failures/toy/{entry.name}: hritest stale: specs/toy.yaml changed since "
+            f"{entry_id(entry)} was recorded (spec digest * then, * now); search again and promote, or delete "
+            f"tests/hri_failures/toy/{entry.name}",
+            "SKIPPED * tests/hri_failures/toy/gone.yaml: hritest stale: its spec specs/gone.yaml no longer exists; "
+            "restore it, or delete tests/hri_failures/toy/gone.yaml",
+        ]
+    )
 
 
 def test_a_stored_failure_that_now_crashes_fails_with_the_plugins_message(project):
@@ -207,20 +240,25 @@ def test_a_stored_failure_that_now_crashes_fails_with_the_plugins_message(projec
     plugins.write_text(plugins.read_text().replace('= "none"\n', '= "raise"\n'))
     result = project.pytester.runpytest()
     result.assert_outcomes(failed=1)
-    result.stdout.fnmatch_lines([
-        f"hritest {entry_id(entry)} no longer evaluates: status plugin_error",
-        "task plugin ToyTask raised RuntimeError: toy plugin exploded",
-        "corpus tests/hri_failures: 0 regressions, 0 still failing, 0 now passing, 0 stale, 1 error",
-        f"ERROR       {entry_id(entry)}  (*)",
-    ])
+    result.stdout.fnmatch_lines(
+        [
+            f"hritest {entry_id(entry)} no longer evaluates: status plugin_error",
+            "task plugin ToyTask raised RuntimeError: toy plugin exploded",
+            "corpus tests/hri_failures: 0 regressions, 0 still failing, 0 now passing, 0 stale, 1 error",
+            f"ERROR       {entry_id(entry)}  (*)",
+        ]
+    )
 
 
-@pytest.mark.parametrize(("old", "new", "field"), [
-    ("seed: 0", "seed: zero", "seed"),
-    ("status: open", "status: maybe", "status"),
-    ("seed: 0\n", "", "seed"),
-    ("  g0x: 0.6\n", "  g0x: [0.6]\n", "theta.g0x"),
-])
+@pytest.mark.parametrize(
+    ("old", "new", "field"),
+    [
+        ("seed: 0", "seed: zero", "seed"),
+        ("status: open", "status: maybe", "status"),
+        ("seed: 0\n", "", "seed"),
+        ("  g0x: 0.6\n", "  g0x: [0.6]\n", "theta.g0x"),
+    ],
+)
 def test_a_malformed_entry_is_a_collection_error_naming_file_and_field(project, old, new, field):
     path = project.record(FAILS_WHEN_FIXED[0], status="open")
     text = path.read_text()
@@ -228,8 +266,9 @@ def test_a_malformed_entry_is_a_collection_error_naming_file_and_field(project, 
     path.write_text(text.replace(old, new, 1))
     result = project.pytester.runpytest()
     assert result.ret == pytest.ExitCode.INTERRUPTED
-    result.stdout.fnmatch_lines([f"*ERROR collecting tests/hri_failures/toy/{path.name}*",
-                                 f"hritest corpus: {path}: field '{field}'*"])
+    result.stdout.fnmatch_lines(
+        [f"*ERROR collecting tests/hri_failures/toy/{path.name}*", f"hritest corpus: {path}: field '{field}'*"]
+    )
 
 
 def test_yaml_that_does_not_parse_is_a_collection_error(project):
@@ -248,8 +287,12 @@ def test_entries_are_named_after_spec_and_id_and_select_with_k_and_hri_spec(proj
     collab = project.record(FAILS_WHEN_FIXED[0], status="open", spec=project.spec("collabtoy"))
 
     result = project.pytester.runpytest("--collect-only", "-q")
-    result.stdout.fnmatch_lines([f"tests/hri_failures/collabtoy/{collab.name}::collabtoy::{collab.stem}",
-                                 f"tests/hri_failures/toy/{toy.name}::toy::{toy.stem}"])
+    result.stdout.fnmatch_lines(
+        [
+            f"tests/hri_failures/collabtoy/{collab.name}::collabtoy::{collab.stem}",
+            f"tests/hri_failures/toy/{toy.name}::toy::{toy.stem}",
+        ]
+    )
     project.pytester.runpytest("-k", "collab").assert_outcomes(xfailed=1, deselected=1)
     project.pytester.runpytest("--hri-spec", "toy").assert_outcomes(xfailed=1, deselected=1)
     project.pytester.runpytest("--hri-spec", "specs/collabtoy.yaml").assert_outcomes(xfailed=1, deselected=1)
@@ -260,8 +303,9 @@ def test_entries_are_named_after_spec_and_id_and_select_with_k_and_hri_spec(proj
 
 def test_a_corpus_outside_the_test_paths_is_found_from_pyproject(pytester, recorder):
     project = Project(pytester, recorder, corpus="regressions/hri")
-    pytester.makepyprojecttoml('[tool.pytest.ini_options]\ntestpaths = ["tests"]\n\n'
-                               '[tool.hritest]\ncorpus = "regressions/hri"\n')
+    pytester.makepyprojecttoml(
+        '[tool.pytest.ini_options]\ntestpaths = ["tests"]\n\n[tool.hritest]\ncorpus = "regressions/hri"\n'
+    )
     pytester.mkdir("tests")
     pytester.path.joinpath("tests", "test_unit.py").write_text("def test_unit():\n    pass\n")
     project.record(FAILS_WHEN_FIXED[0], status="open")
@@ -276,7 +320,8 @@ def test_a_corpus_outside_the_test_paths_is_found_from_pyproject(pytester, recor
 
 
 def test_hri_scenario_fixture_simulates_a_scenario(project):
-    project.pytester.makepyfile(test_mine="""
+    project.pytester.makepyfile(
+        test_mine="""
         def test_goals_apart(hri_scenario):
             evaluation, rollout = hri_scenario("specs/toy.yaml", [0.52, -0.08, 0.68, 0.18, 0, 0, 0])
             assert evaluation.status == "ok" and not evaluation.failure
@@ -291,7 +336,8 @@ def test_hri_scenario_fixture_simulates_a_scenario(project):
 
         def test_wrong_length(hri_scenario):
             hri_scenario("specs/toy.yaml", [0.5])
-    """)
+    """
+    )
     result = project.pytester.runpytest("-m", "hri")
     result.assert_outcomes(passed=2, failed=1)
     result.stdout.fnmatch_lines(["*ValueError: hri_scenario: specs/toy.yaml needs 7 theta values*got 1"])
@@ -309,8 +355,14 @@ def searched_once(tmp_path_factory) -> None:
     folder = tmp_path_factory.mktemp("warm")
     shutil.copy(FIXTURES / "toy_plugins.py", folder / "toy_plugins.py")
     shutil.copy(FIXTURES / "toy.yaml", folder / "toy.yaml")
-    qd.start(spec_file=folder / "toy.yaml", out=folder / "run", algorithm="random", budget=20, seed=0,
-             backend=qd.Backend(workers=1))
+    qd.start(
+        spec_file=folder / "toy.yaml",
+        out=folder / "run",
+        algorithm="random",
+        budget=20,
+        seed=0,
+        backend=qd.Backend(workers=1),
+    )
 
 
 def test_search_budget_fails_on_failures_the_corpus_does_not_hold(project, searched_once):
@@ -318,13 +370,15 @@ def test_search_budget_fails_on_failures_the_corpus_does_not_hold(project, searc
     project.record(FAILS_WHEN_FIXED[0], status="open")
     result = project.pytester.runpytest("--hri-search-budget", "40")
     result.assert_outcomes(xfailed=1, failed=1)
-    result.stdout.fnmatch_lines([
-        "*a Random search of 40 evaluations found * failure(s) of toy that the corpus does not hold:",
-        "keep them: hritest promote .pytest_cache/d/hritest-search/toy --to tests/hri_failures",
-        "corpus tests/hri_failures: 0 regressions, 1 still failing, 0 now passing, 0 stale, "
-        "1 search with new failures",
-        "NEW         toy/search  (failures the corpus does not hold; tests/hri_failures/toy::search)",
-    ])
+    result.stdout.fnmatch_lines(
+        [
+            "*a Random search of 40 evaluations found * failure(s) of toy that the corpus does not hold:",
+            "keep them: hritest promote .pytest_cache/d/hritest-search/toy --to tests/hri_failures",
+            "corpus tests/hri_failures: 0 regressions, 1 still failing, 0 now passing, 0 stale, "
+            "1 search with new failures",
+            "NEW         toy/search  (failures the corpus does not hold; tests/hri_failures/toy::search)",
+        ]
+    )
     run = project.pytester.path / ".pytest_cache" / "d" / "hritest-search" / "toy"
     promoted = CliRunner().invoke(app, ["promote", str(run), "--to", str(project.corpus)])
     assert promoted.exit_code == 0, promoted.output

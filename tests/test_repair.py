@@ -31,8 +31,7 @@ def collaboration(n: int = 3) -> RepairProblem:
     return RepairProblem(
         object_names=tuple(f"goal{i}" for i in range(n)),
         half_sizes=np.full((n, 2), HALF),
-        regions=tuple(Region(name=m, x=(c[0] - 0.08, c[0] + 0.08), y=(c[1] - 0.13, c[1] + 0.13))
-                      for m, c in ws),
+        regions=tuple(Region(name=m, x=(c[0] - 0.08, c[0] + 0.08), y=(c[1] - 0.13, c[1] + 0.13)) for m, c in ws),
         allowed_regions=((0, 1),) * n,
         no_overlap=tuple(itertools.combinations(range(n), 2)),
         bounds=np.tile([-1 + HALF, 1 - HALF], (n, 2, 1)),
@@ -76,7 +75,8 @@ def random_instance(rng: np.random.Generator) -> tuple[RepairProblem, np.ndarray
             hi = np.minimum(lo + rng.integers(1, 6, size=2), U)
             regions.append(Region(name=f"r{r}", x=(lo[0] * G, hi[0] * G), y=(lo[1] * G, hi[1] * G)))
         allowed = tuple(
-            () if rng.random() < 0.15
+            ()
+            if rng.random() < 0.15
             else tuple(sorted(rng.choice(n_regions, rng.integers(1, n_regions + 1), replace=False)))
             for _ in range(n)
         )
@@ -101,9 +101,13 @@ def _candidates(problem: RepairProblem, i: int) -> np.ndarray:
     """Integer G-lattice points (in units of G) where object i's centre may go."""
     boxes = [(problem.bounds[i, :, 0], problem.bounds[i, :, 1])]
     if problem.allowed_regions[i]:
-        boxes = [(np.maximum(boxes[0][0], [problem.regions[r].x[0], problem.regions[r].y[0]]),
-                  np.minimum(boxes[0][1], [problem.regions[r].x[1], problem.regions[r].y[1]]))
-                 for r in problem.allowed_regions[i]]
+        boxes = [
+            (
+                np.maximum(boxes[0][0], [problem.regions[r].x[0], problem.regions[r].y[0]]),
+                np.minimum(boxes[0][1], [problem.regions[r].x[1], problem.regions[r].y[1]]),
+            )
+            for r in problem.allowed_regions[i]
+        ]
     axes = [[np.arange(round(a / G), round(b / G) + 1) for a, b in zip(lo, hi)] for lo, hi in boxes]
     points = [np.stack(np.meshgrid(*ax, indexing="ij"), -1).reshape(-1, 2) for ax in axes]
     return np.unique(np.concatenate(points), axis=0)
@@ -114,9 +118,15 @@ def _has_witness(problem: RepairProblem, rng: np.random.Generator) -> bool:
     for _ in range(50):
         placed = []
         for i in range(problem.n):
-            options = [p for p in _candidates(problem, i) if all(
-                (np.abs(p - q) * G >= problem.half_sizes[i] + problem.half_sizes[j]).any()
-                for j, q in enumerate(placed) if (j, i) in problem.no_overlap)]
+            options = [
+                p
+                for p in _candidates(problem, i)
+                if all(
+                    (np.abs(p - q) * G >= problem.half_sizes[i] + problem.half_sizes[j]).any()
+                    for j, q in enumerate(placed)
+                    if (j, i) in problem.no_overlap
+                )
+            ]
             if not options:
                 break
             placed.append(options[rng.integers(len(options))])
@@ -137,7 +147,7 @@ def brute_force(problem: RepairProblem, xy: np.ndarray, upper: float) -> float:
     order = np.argsort([len(p) for p in points])
     chosen, total = np.arange(len(points[order[0]]))[:, None], costs[order[0]]
     for depth, o in enumerate(order[1:], start=1):
-        rest = sum(floor[k] for k in order[depth + 1:])
+        rest = sum(floor[k] for k in order[depth + 1 :])
         ok = total[:, None] + costs[o][None, :] + rest <= upper
         for slot, placed in enumerate(order[:depth]):
             if (min(placed, o), max(placed, o)) in problem.no_overlap:
@@ -167,8 +177,11 @@ def test_repair_matches_brute_force(seed):
 
 def test_min_separation_splits_the_move():
     problem = RepairProblem(
-        object_names=("a", "b"), half_sizes=np.zeros((2, 2)), regions=(),
-        allowed_regions=((), ()), min_separation=((0, 1, 0.1),),
+        object_names=("a", "b"),
+        half_sizes=np.zeros((2, 2)),
+        regions=(),
+        allowed_regions=((), ()),
+        min_separation=((0, 1, 0.1),),
         bounds=np.tile([-1.0, 1.0], (2, 2, 1)),
     )
     result = repair(problem, np.array([[0.3, 0.2], [0.3, 0.2]]))
@@ -249,8 +262,9 @@ def test_valid_input_is_returned_unchanged(xy):
     result = repair(PAPER, xy)
     assert result.status == "unchanged" and result.cost == 0.0
     np.testing.assert_array_equal(result.xy, xy)
-    assert all(r is not None and PAPER.regions[r].x[0] <= p[0] <= PAPER.regions[r].x[1]
-               for r, p in zip(result.regions, xy))
+    assert all(
+        r is not None and PAPER.regions[r].x[0] <= p[0] <= PAPER.regions[r].x[1] for r, p in zip(result.regions, xy)
+    )
 
 
 @settings(max_examples=30, deadline=None)
@@ -274,8 +288,7 @@ def clip_case(draw):
     batch = draw(st.integers(1, 4))
     lo = np.array(draw(st.lists(st.floats(-1, 1), min_size=d, max_size=d)))
     hi = lo + np.array(draw(st.lists(st.floats(0, 1), min_size=d, max_size=d)))
-    theta = np.array(draw(st.lists(st.lists(st.floats(-3, 3), min_size=d, max_size=d),
-                                   min_size=batch, max_size=batch)))
+    theta = np.array(draw(st.lists(st.lists(st.floats(-3, 3), min_size=d, max_size=d), min_size=batch, max_size=batch)))
     order = draw(st.permutations(range(d)))
     cuts = sorted(draw(st.sets(st.integers(1, d), max_size=3)))
     groups = [order[a:b] for a, b in zip([0] + cuts, cuts + [d]) if order[a:b]]
@@ -339,9 +352,11 @@ def test_check_feasible_names_a_minimal_conflict():
 
 def test_check_feasible_names_bounds_that_exclude_a_region():
     problem = RepairProblem(
-        object_names=("cup",), half_sizes=np.zeros((1, 2)),
+        object_names=("cup",),
+        half_sizes=np.zeros((1, 2)),
         regions=(Region(name="shelf", x=(2.0, 3.0), y=(0.0, 1.0)),),
-        allowed_regions=((0,),), bounds=np.tile([-1.0, 1.0], (1, 2, 1)),
+        allowed_regions=((0,),),
+        bounds=np.tile([-1.0, 1.0], (1, 2, 1)),
     )
     with pytest.raises(InfeasibleConstraints, match=r"cup within its bounds.*cup inside shelf"):
         check_feasible(problem)
@@ -410,8 +425,7 @@ def test_touching_is_decided_exactly():
     ],
 )
 def test_problem_validation_says_what_to_fix(change, match):
-    names = ("object_names", "half_sizes", "regions", "allowed_regions", "no_overlap",
-             "min_separation", "bounds")
+    names = ("object_names", "half_sizes", "regions", "allowed_regions", "no_overlap", "min_separation", "bounds")
     fields = {f: getattr(PAPER, f) for f in names}
     with pytest.raises(ValueError, match=match):
         RepairProblem(**(fields | change))

@@ -25,8 +25,14 @@ def run(tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("toy")
     shutil.copy(FIXTURES / "toy_plugins.py", folder / "toy_plugins.py")
     shutil.copy(FIXTURES / "toy.yaml", folder / "toy.yaml")
-    qd.start(spec_file=folder / "toy.yaml", out=folder / "run", algorithm="random", budget=120, seed=4,
-             backend=qd.Backend(workers=1))
+    qd.start(
+        spec_file=folder / "toy.yaml",
+        out=folder / "run",
+        algorithm="random",
+        budget=120,
+        seed=4,
+        backend=qd.Backend(workers=1),
+    )
     return folder / "run"
 
 
@@ -49,7 +55,12 @@ def test_a_stored_failure_replays_to_its_stored_outcome(run):
 
     replayed = replay_failure(run, fid)
     assert replayed.matches and [c.name for c in replayed.checks] == [
-        "status", "failure", "objective", "goal_distance", "variation"]
+        "status",
+        "failure",
+        "objective",
+        "goal_distance",
+        "variation",
+    ]
 
 
 def test_a_tampered_stored_objective_is_a_finding(run, tmp_path):
@@ -99,8 +110,12 @@ def test_bad_input_exits_2(run, tmp_path):
         (["replay", str(SPECS / "teleop.yaml"), "--theta", "1,2"], "got 2 values"),
     ]
     (tmp_path / "file").write_text("")
-    cases.append((["replay", str(run), "--failure", str(fid), "--out", str(tmp_path / "file" / "x.rrd")],
-                  "cannot write the recording"))
+    cases.append(
+        (
+            ["replay", str(run), "--failure", str(fid), "--out", str(tmp_path / "file" / "x.rrd")],
+            "cannot write the recording",
+        )
+    )
     for args, message in cases:
         result = runner.invoke(app, args)
         assert result.exit_code == 2, (args, result.output)
@@ -110,8 +125,19 @@ def test_bad_input_exits_2(run, tmp_path):
 
 def test_any_scenario_of_a_spec_replays_deterministically(tmp_path):
     out = tmp_path / "teleop.rrd"
-    result = runner.invoke(app, ["replay", str(SPECS / "teleop.yaml"), "--theta", "0.6,0.05,0.6,0.09,0,0,0,0,0",
-                                 "--seed", "3", "--out", str(out)])
+    result = runner.invoke(
+        app,
+        [
+            "replay",
+            str(SPECS / "teleop.yaml"),
+            "--theta",
+            "0.6,0.05,0.6,0.09,0,0,0,0,0",
+            "--seed",
+            "3",
+            "--out",
+            str(out),
+        ],
+    )
     assert result.exit_code == 0, result.output
     assert "a first simulation of the same theta and seed" in result.output
     entities = recorded_entities(out)

@@ -15,7 +15,7 @@ from hritest.cli import app
 runner = CliRunner()
 
 
-def invoke(*args: str | Path):  # noqa: ANN201 - click's Result
+def invoke(*args: str | Path):
     return runner.invoke(app, [str(a) for a in args])
 
 
@@ -32,8 +32,22 @@ def domain(tmp_path_factory) -> Path:
 def search(spec: Path, out: Path, algorithm: str, budget: int) -> list[dict]:
     """A search through the command line; returns its evaluations."""
     extra = ["--inner-iterations", "3"] if algorithm in ("sas", "dsas") else []
-    result = invoke("search", spec, "--algorithm", algorithm, "--budget", budget, "--seed", 0, "--workers", 2,
-                    "--quiet", "--out", out, *extra)
+    result = invoke(
+        "search",
+        spec,
+        "--algorithm",
+        algorithm,
+        "--budget",
+        budget,
+        "--seed",
+        0,
+        "--workers",
+        2,
+        "--quiet",
+        "--out",
+        out,
+        *extra,
+    )
     assert result.exit_code in (0, 1) and isinstance(result.exception, SystemExit | None), result.output
     return [json.loads(line) for line in (out / "evaluations.jsonl").read_text().splitlines()]
 
@@ -92,8 +106,9 @@ def test_new_never_overwrites(tmp_path):
     assert not (tmp_path / "mine.yaml").exists()  # all or nothing
 
 
-@pytest.mark.parametrize(("name", "suggestion"), [("my-domain", "my_domain"), ("2arms", "domain_2arms"),
-                                                  ("_x", "x"), ("é", "my_domain")])
+@pytest.mark.parametrize(
+    ("name", "suggestion"), [("my-domain", "my_domain"), ("2arms", "domain_2arms"), ("_x", "x"), ("é", "my_domain")]
+)
 def test_a_bad_name_exits_2_with_one_to_use(tmp_path, name, suggestion):
     result = invoke("new", name, "--dir", tmp_path)
     assert result.exit_code == 2

@@ -40,7 +40,7 @@ def theta_arg(values) -> str:
 
 
 def test_every_shipped_spec_validates():
-    assert EXPECTED <= {p.stem for p in ALL}
+    assert {p.stem for p in ALL} >= EXPECTED
     result = runner.invoke(app, ["validate", *map(str, ALL)])
     assert result.exit_code == 0, result.output
     for path in ALL:
@@ -69,25 +69,42 @@ def test_show_prints_the_collaboration_layout():
     assert result.exit_code == 0, result.output
     text = text_of(result.output)
     assert "theta: 6 components" in text
-    for index, (label, lower, upper) in enumerate([("x0", "0.138", "0.68"), ("y0", "-0.08", "0.756"),
-                                                   ("x1", "0.138", "0.68"), ("y1", "-0.08", "0.756"),
-                                                   ("x2", "0.138", "0.68"), ("y2", "-0.08", "0.756")]):
+    for index, (label, lower, upper) in enumerate(
+        [
+            ("x0", "0.138", "0.68"),
+            ("y0", "-0.08", "0.756"),
+            ("x1", "0.138", "0.68"),
+            ("y1", "-0.08", "0.756"),
+            ("x2", "0.138", "0.68"),
+            ("y2", "-0.08", "0.756"),
+        ]
+    ):
         bind = f"goal{index // 2}.{label[0]}"
         assert f"{index} {label} {bind} {lower} {upper}" in text
-    for words in ("CollaborationTask", "CollabRobot", "MdpHuman", "27 x 65 cells",
-                  "goal_distance min_goal_distance [0.05, 0.32] 27", "failure when objective >= 60",
-                  "regions=['ws1', 'ws2']"):
+    for words in (
+        "CollaborationTask",
+        "CollabRobot",
+        "MdpHuman",
+        "27 x 65 cells",
+        "goal_distance min_goal_distance [0.05, 0.32] 27",
+        "failure when objective >= 60",
+        "regions=['ws1', 'ws2']",
+    ):
         assert words in text, words
 
 
 # --- simulate ------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize(("path", "theta", "code"), [
-    (TELEOP, EASY, 0),
-    (TELEOP, DISTRACTOR, 1),  # a failure: objective >= 10
-    (SPECS / "collab_wait.yaml", [0.4, 0.3, 0.6, 0.1, 0.2, 0.7], 0),  # needs repair
-], ids=["teleop-ok", "teleop-failure", "collab-repaired"])
+@pytest.mark.parametrize(
+    ("path", "theta", "code"),
+    [
+        (TELEOP, EASY, 0),
+        (TELEOP, DISTRACTOR, 1),  # a failure: objective >= 10
+        (SPECS / "collab_wait.yaml", [0.4, 0.3, 0.6, 0.1, 0.2, 0.7], 0),  # needs repair
+    ],
+    ids=["teleop-ok", "teleop-failure", "collab-repaired"],
+)
 def test_simulate_json_matches_evaluate(path, theta, code):
     result = runner.invoke(app, ["simulate", str(path), "--theta", theta_arg(theta), "--json", "--seed", "3"])
     assert result.exit_code == code, result.output
@@ -110,11 +127,15 @@ def test_simulate_json_matches_evaluate(path, theta, code):
 # --- repair --------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize(("path", "theta", "status"), [
-    (SPECS / "collab.yaml", [0.4, 0.3, 0.4, 0.3, 0.4, 0.3], "repaired"),  # between the regions, stacked
-    (SPECS / "collab.yaml", [0.55, -0.05, 0.65, 0.15, 0.2, 0.6], "unchanged"),
-    (TELEOP, [0.75, 0.05, 0.6, -0.2, 0.1, 0, 0, 0, 0], "ok"),  # out of bounds: clipped
-], ids=["collab-moved", "collab-valid", "teleop-clipped"])
+@pytest.mark.parametrize(
+    ("path", "theta", "status"),
+    [
+        (SPECS / "collab.yaml", [0.4, 0.3, 0.4, 0.3, 0.4, 0.3], "repaired"),  # between the regions, stacked
+        (SPECS / "collab.yaml", [0.55, -0.05, 0.65, 0.15, 0.2, 0.6], "unchanged"),
+        (TELEOP, [0.75, 0.05, 0.6, -0.2, 0.1, 0, 0, 0, 0], "ok"),  # out of bounds: clipped
+    ],
+    ids=["collab-moved", "collab-valid", "teleop-clipped"],
+)
 def test_repair_json_matches_the_domains_repair(path, theta, status):
     result = runner.invoke(app, ["repair", str(path), "--theta", theta_arg(theta), "--json"])
     assert result.exit_code == 0, result.output

@@ -25,7 +25,7 @@ from hritest.report import figures
 from hritest.report.html import Badge, Code, Details, Document, Figure, Link, Section, Table, Text, to_html, to_markdown
 from hritest.rundir import RunDirectory, atomic_write
 
-__all__ = ["RunData", "compare_runs", "load_run", "most_different", "write_report", "worst_failures"]
+__all__ = ["RunData", "compare_runs", "load_run", "most_different", "worst_failures", "write_report"]
 
 RECORDINGS = 10  # the worst failures recorded by default (the most different ones come on top)
 SPLITS = 3  # blocks per measure when picking the most different failures
@@ -82,8 +82,10 @@ def load_run(path: Path) -> RunData:
     run = RunDirectory.open(path)
     records = run.evaluations()
     if not records:
-        raise EmptyRunError(f"{run.path} has no evaluations yet; there is nothing to report. "
-                            "Run 'hritest search --resume' on it, or start a new search")
+        raise EmptyRunError(
+            f"{run.path} has no evaluations yet; there is nothing to report. "
+            "Run 'hritest search --resume' on it, or start a new search"
+        )
     spec = load_spec(run.path / "spec.yaml")
     by_index = {int(r["index"]): r for r in records}
     elite_ids = _elite_ids(run)
@@ -124,11 +126,12 @@ def _elite_ids(run: RunDirectory) -> list[int]:
 
 def worst_failures(failures: Sequence[Mapping[str, Any]], count: int) -> list[Mapping[str, Any]]:
     """The ``count`` failures with the highest objective (ties: lowest id first)."""
-    return sorted(failures, key=lambda r: (-(r["objective"] or 0.0), r["index"]))[:max(count, 0)]
+    return sorted(failures, key=lambda r: (-(r["objective"] or 0.0), r["index"]))[: max(count, 0)]
 
 
-def most_different(failures: Sequence[Mapping[str, Any]], ranges: Sequence[tuple[float, float]],
-                   splits: int = SPLITS) -> list[tuple[str, Mapping[str, Any]]]:
+def most_different(
+    failures: Sequence[Mapping[str, Any]], ranges: Sequence[tuple[float, float]], splits: int = SPLITS
+) -> list[tuple[str, Mapping[str, Any]]]:
     """The worst failure in each block of the measure space, each measure's range cut in ``splits``.
 
     Returns ``(block, failure)`` pairs in block order, e.g. ``("low / high", record)``: the
@@ -148,8 +151,9 @@ def _block(value: float | None, lo: float, hi: float, splits: int) -> int:
     return int(min(max((value - lo) / (hi - lo) * splits, 0), splits - 1))
 
 
-def chosen_failures(failures: Sequence[Mapping[str, Any]], ranges: Sequence[tuple[float, float]],
-                    count: int) -> list[Mapping[str, Any]]:
+def chosen_failures(
+    failures: Sequence[Mapping[str, Any]], ranges: Sequence[tuple[float, float]], count: int
+) -> list[Mapping[str, Any]]:
     """The failures to record: the ``count`` worst and the most different ones (none when 0)."""
     if count <= 0:
         return []
@@ -185,9 +189,14 @@ def record_failures(data: RunData, failures: Sequence[Mapping[str, Any]]) -> dic
     done = {}
     for record in failures:
         replay = replay_record(domain, record, spec_digest=data.meta["spec_digest"])
-        path = write_recording(folder / f"{record['index']}.rrd", domain=domain, evaluation=replay.evaluation,
-                               rollout=replay.rollout, recording_id=replay.digest,
-                               title=f"{data.spec.name}: failure {record['index']} ({data.name})")
+        path = write_recording(
+            folder / f"{record['index']}.rrd",
+            domain=domain,
+            evaluation=replay.evaluation,
+            rollout=replay.rollout,
+            recording_id=replay.digest,
+            title=f"{data.spec.name}: failure {record['index']} ({data.name})",
+        )
         done[record["index"]] = Recorded(path, replay.matches, tuple(c.name for c in replay.checks if not c.ok))
     return done
 
@@ -241,49 +250,97 @@ def _write(doc: Document, out: Path) -> None:
     atomic_write(out / "index.html", to_html(doc))
 
 
-
-def run_document(data: RunData, recorded: Mapping[int, Recorded], *, link_base: Path,
-                 worst_count: int = RECORDINGS) -> Document:
+def run_document(
+    data: RunData, recorded: Mapping[int, Recorded], *, link_base: Path, worst_count: int = RECORDINGS
+) -> Document:
     """The report of one run as a document (no I/O: given the run and its recordings)."""
     spec = data.spec
     worst = worst_failures(data.failures, worst_count)
     diverse = most_different(data.failures, data.ranges)
     labelled = [r["index"] for _, r in diverse]  # one per block of the measure space: apart, so readable
     sections = [Section("The run at a glance", _glance(data))]
-    archive_blocks: list = [Figure("archive.png", figures.archive_heatmap(_view(data, labelled)),
-                                   alt=f"result archive of {data.name}",
-                                   caption=f"Best objective ({spec.objective.expr}) in each cell of the result "
-                                           f"archive over {' and '.join(data.measure_names)}; grey cells are empty. Red "
-                                           f"circles are failures ({spec.failure}); the numbered ones are the most "
-                                           f"different failures, tabled below.")]
+    archive_blocks: list = [
+        Figure(
+            "archive.png",
+            figures.archive_heatmap(_view(data, labelled)),
+            alt=f"result archive of {data.name}",
+            caption=f"Best objective ({spec.objective.expr}) in each cell of the result "
+            f"archive over {' and '.join(data.measure_names)}; grey cells are empty. Red "
+            f"circles are failures ({spec.failure}); the numbered ones are the most "
+            f"different failures, tabled below.",
+        )
+    ]
     sections.append(Section("Result archive", archive_blocks))
-    sections.append(Section("QD-score", [
-        Figure("qd_score.png", figures.qd_curves([(data.name, data.progress)]), alt="QD-score curves",
-               caption="QD-score of the result archive after each batch, against evaluations and against the "
-                       "search's wall time."),
-        Details(f"Progress log ({len(data.progress)} row{'s' * (len(data.progress) != 1)} of progress.csv)",
-                [_progress_table(data.progress)]),
-    ]))
+    sections.append(
+        Section(
+            "QD-score",
+            [
+                Figure(
+                    "qd_score.png",
+                    figures.qd_curves([(data.name, data.progress)]),
+                    alt="QD-score curves",
+                    caption="QD-score of the result archive after each batch, against evaluations and against the "
+                    "search's wall time.",
+                ),
+                Details(
+                    f"Progress log ({len(data.progress)} row{'s' * (len(data.progress) != 1)} of progress.csv)",
+                    [_progress_table(data.progress)],
+                ),
+            ],
+        )
+    )
     if not data.failures:
-        sections.append(Section("Failures", [Text(
-            f"No failures: no elite of the result archive meets the failure condition '{spec.failure}' "
-            f"after {len(data.records)} evaluations.", note=True)]))
+        sections.append(
+            Section(
+                "Failures",
+                [
+                    Text(
+                        f"No failures: no elite of the result archive meets the failure condition '{spec.failure}' "
+                        f"after {len(data.records)} evaluations.",
+                        note=True,
+                    )
+                ],
+            )
+        )
     else:
-        sections.append(Section(f"Worst failures ({len(worst)} of {len(data.failures)})", [
-            _failure_table(data, [("", r) for r in worst], recorded, link_base, regions=False),
-            Text(_replay_note(data, recorded)),
-        ]))
-        sections.append(Section(f"Most different failures ({len(diverse)} regions)", [
-            Text(f"Each measure's range is cut into {SPLITS}; each row is the worst failure in one block of the "
-                 f"measure space ({' / '.join(data.measure_names)})."),
-            _failure_table(data, diverse, recorded, link_base, regions=True),
-            Details(f"All {len(data.failures)} failures, worst first",
-                    [_failure_table(data, [("", r) for r in worst_failures(data.failures, len(data.failures))],
-                                    recorded, link_base, regions=False)]),
-        ]))
-    return Document(title=f"hritest report: {data.name}",
-                    subtitle=f"{spec.name}: {spec.description}".rstrip(": "),
-                    sections=sections)
+        sections.append(
+            Section(
+                f"Worst failures ({len(worst)} of {len(data.failures)})",
+                [
+                    _failure_table(data, [("", r) for r in worst], recorded, link_base, regions=False),
+                    Text(_replay_note(data, recorded)),
+                ],
+            )
+        )
+        sections.append(
+            Section(
+                f"Most different failures ({len(diverse)} regions)",
+                [
+                    Text(
+                        f"Each measure's range is cut into {SPLITS}; each row is the worst failure in one block of the "
+                        f"measure space ({' / '.join(data.measure_names)})."
+                    ),
+                    _failure_table(data, diverse, recorded, link_base, regions=True),
+                    Details(
+                        f"All {len(data.failures)} failures, worst first",
+                        [
+                            _failure_table(
+                                data,
+                                [("", r) for r in worst_failures(data.failures, len(data.failures))],
+                                recorded,
+                                link_base,
+                                regions=False,
+                            )
+                        ],
+                    ),
+                ],
+            )
+        )
+    return Document(
+        title=f"hritest report: {data.name}",
+        subtitle=f"{spec.name}: {spec.description}".rstrip(": "),
+        sections=sections,
+    )
 
 
 def _glance(data: RunData) -> list:
@@ -295,14 +352,19 @@ def _glance(data: RunData) -> list:
     rows = [
         ("spec", f"{spec.name} ({meta.get('spec_file', 'spec.yaml')})"),
         ("spec digest", str(meta.get("spec_digest", ""))[:16]),
-        ("algorithm", f"{meta.get('algorithm', '?')}, seed {meta.get('seed', '?')}"
-                      + (f", {meta['inner_iterations']:,} inner iterations" if "inner_iterations" in meta else "")),
+        (
+            "algorithm",
+            f"{meta.get('algorithm', '?')}, seed {meta.get('seed', '?')}"
+            + (f", {meta['inner_iterations']:,} inner iterations" if "inner_iterations" in meta else ""),
+        ),
         ("evaluations", f"{len(data.records)} of a budget of {meta.get('budget', '?')}"),
         ("statuses", ", ".join(f"{n} {s}" for s, n in sorted(statuses.items()))),
         ("wall time", f"{last['wall_time']:.1f} s" if "wall_time" in last else "not recorded"),
         ("QD-score", f"{last['qd_score']:.2f}" if "qd_score" in last else "not recorded"),
-        ("QD-score, normalised", f"{last['normalized_qd_score']:.4f}" if "normalized_qd_score" in last
-         else "not recorded"),
+        (
+            "QD-score, normalised",
+            f"{last['normalized_qd_score']:.4f}" if "normalized_qd_score" in last else "not recorded",
+        ),
         ("coverage", f"{last['coverage']:.2%} of {cells} cells" if "coverage" in last else "not recorded"),
         ("best objective", f"{max((r['objective'] for r in data.elites), default=float('nan')):.4g}"),
         ("failures", f"{len(data.failures)} elites meet '{spec.failure}'"),
@@ -311,14 +373,23 @@ def _glance(data: RunData) -> list:
     blocks: list = [Table(["", ""], [[k, v] for k, v in rows])]
     if data.surrogate is not None:
         overall = {k: v for k, v in data.surrogate.items() if k not in ("per_outer_iteration", "fits")}
-        blocks.append(Table(["surrogate", "value"], [[k, v] for k, v in _flatten(overall)],
-                            caption="Surrogate accuracy on the proposals it made, before they were simulated "
-                                    "(surrogate.json)"))
+        blocks.append(
+            Table(
+                ["surrogate", "value"],
+                [[k, v] for k, v in _flatten(overall)],
+                caption="Surrogate accuracy on the proposals it made, before they were simulated (surrogate.json)",
+            )
+        )
         per_outer = data.surrogate.get("per_outer_iteration", [])
         if per_outer:
             columns = ["outer_iteration", "held_out", "objective_mae", "right_cell_fraction", "mean_cell_distance"]
-            blocks.append(Table(columns, [[_format(row[c]) for c in columns] for row in per_outer],
-                                caption="The same, per outer iteration"))
+            blocks.append(
+                Table(
+                    columns,
+                    [[_format(row[c]) for c in columns] for row in per_outer],
+                    caption="The same, per outer iteration",
+                )
+            )
     return blocks
 
 
@@ -341,10 +412,15 @@ def _view(data: RunData, labelled: Sequence[int], title: str | None = None) -> f
     spec = data.spec
     return figures.ArchiveView(
         title=title or f"{data.name}: {len(data.elites)} elites, {len(data.failures)} failures",
-        measure_names=data.measure_names, ranges=data.ranges, cells=[m.cells for m in spec.measures],
-        objective_range=tuple(spec.objective.range), objective_label=f"objective: {spec.objective.expr}",
+        measure_names=data.measure_names,
+        ranges=data.ranges,
+        cells=[m.cells for m in spec.measures],
+        objective_range=tuple(spec.objective.range),
+        objective_label=f"objective: {spec.objective.expr}",
         elites=[(r["objective"], r["measures"]) for r in data.elites],
-        failures=[(r["index"], r["measures"]) for r in data.failures], labelled=labelled)
+        failures=[(r["index"], r["measures"]) for r in data.failures],
+        labelled=labelled,
+    )
 
 
 def _progress_table(progress: Sequence[Mapping[str, float]]) -> Table:
@@ -358,10 +434,23 @@ def _num(value: float | None) -> str:
     return str(int(value)) if float(value).is_integer() and abs(value) < 1e12 else f"{value:.6g}"
 
 
-def _failure_table(data: RunData, rows: Sequence[tuple[str, Mapping[str, Any]]], recorded: Mapping[int, Recorded],
-                   link_base: Path, *, regions: bool) -> Table:
-    headers = (["region"] if regions else []) + ["id", "objective", *data.measure_names, "repair cost", "seed",
-                                                 "scenario parameters (repaired theta)", "recording"]
+def _failure_table(
+    data: RunData,
+    rows: Sequence[tuple[str, Mapping[str, Any]]],
+    recorded: Mapping[int, Recorded],
+    link_base: Path,
+    *,
+    regions: bool,
+) -> Table:
+    headers = (["region"] if regions else []) + [
+        "id",
+        "objective",
+        *data.measure_names,
+        "repair cost",
+        "seed",
+        "scenario parameters (repaired theta)",
+        "recording",
+    ]
     labels = data.labels
     table_rows = []
     for block, r in rows:
@@ -371,11 +460,23 @@ def _failure_table(data: RunData, rows: Sequence[tuple[str, Mapping[str, Any]]],
             recording: Any = "not recorded"
         else:
             link = Link(f"{r['index']}.rrd", os.path.relpath(found.path, link_base))
-            recording = link if found.matches is not False else Badge(f"{link.text}: replay differs in "
-                                                         f"{', '.join(found.differs)}", False)
-        table_rows.append([*([block] if regions else []), str(r["index"]), _fmt(r["objective"]),
-                           *(_fmt(v) for v in r["measures"]), _fmt(r["repair_cost"]), str(r["seed"]), Code(theta),
-                           recording])
+            recording = (
+                link
+                if found.matches is not False
+                else Badge(f"{link.text}: replay differs in {', '.join(found.differs)}", False)
+            )
+        table_rows.append(
+            [
+                *([block] if regions else []),
+                str(r["index"]),
+                _fmt(r["objective"]),
+                *(_fmt(v) for v in r["measures"]),
+                _fmt(r["repair_cost"]),
+                str(r["seed"]),
+                Code(theta),
+                recording,
+            ]
+        )
     return Table(headers, table_rows)
 
 
@@ -386,15 +487,21 @@ def _fmt(value: float | None) -> str:
 def _replay_note(data: RunData, recorded: Mapping[int, Recorded]) -> str:
     recorded = {i: r for i, r in recorded.items() if r.matches is not None}
     if not recorded:
-        return ("No failure was re-simulated for this report (--recordings 0); links go to recordings made "
-                f"earlier, if any. Make one with 'hritest replay {data.path} --failure ID'.")
+        return (
+            "No failure was re-simulated for this report (--recordings 0); links go to recordings made "
+            f"earlier, if any. Make one with 'hritest replay {data.path} --failure ID'."
+        )
     differ = sorted(i for i, r in recorded.items() if not r.matches)
-    verdict = ("each re-simulation reproduced its stored outcome (status, failure verdict, objective and measures "
-               "within 1e-6)" if not differ else f"the re-simulations of failures {differ} did NOT reproduce their "
-               "stored outcome")
-    return (f"{len(recorded)} failures were re-simulated from their stored raw theta and seed and recorded for "
-            f"Rerun under recordings/; {verdict}. Open one with 'rerun FILE.rrd', or "
-            f"'hritest replay {data.path} --failure ID --open'.")
+    verdict = (
+        "each re-simulation reproduced its stored outcome (status, failure verdict, objective and measures within 1e-6)"
+        if not differ
+        else f"the re-simulations of failures {differ} did NOT reproduce their stored outcome"
+    )
+    return (
+        f"{len(recorded)} failures were re-simulated from their stored raw theta and seed and recorded for "
+        f"Rerun under recordings/; {verdict}. Open one with 'rerun FILE.rrd', or "
+        f"'hritest replay {data.path} --failure ID --open'."
+    )
 
 
 # --- comparing runs --------------------------------------------------------------------------
@@ -419,22 +526,44 @@ def compare_document(runs: Sequence[RunData], *, link_base: Path) -> Document:
     reports = []
     for label, d in zip(labels, runs):
         page = d.path / "report" / "index.html"
-        reports.append(Link(label, os.path.relpath(page, link_base)) if page.is_file() else
-                       f"{label}: no report yet (hritest report {d.path})")
+        reports.append(
+            Link(label, os.path.relpath(page, link_base))
+            if page.is_file()
+            else f"{label}: no report yet (hritest report {d.path})"
+        )
     rows.append(["report", *reports])
     curves = figures.qd_curves([(label, d.progress) for label, d in zip(labels, runs)], normalised=not same_spec)
-    heatmaps = figures.archive_heatmaps([_view(d, [], title=f"{label}: {len(d.failures)} failures")
-                                         for label, d in zip(labels, runs)])
-    note = [] if same_spec else [Text("These runs come from different specs, so the curves show the normalised "
-                                      "QD-score (QD-score / (cells x objective range)).", note=True)]
+    heatmaps = figures.archive_heatmaps(
+        [_view(d, [], title=f"{label}: {len(d.failures)} failures") for label, d in zip(labels, runs)]
+    )
+    note = (
+        []
+        if same_spec
+        else [
+            Text(
+                "These runs come from different specs, so the curves show the normalised "
+                "QD-score (QD-score / (cells x objective range)).",
+                note=True,
+            )
+        ]
+    )
     return Document(
         title=f"hritest comparison of {len(runs)} runs",
         subtitle=", ".join(labels),
         sections=[
             Section("The runs at a glance", [Table(["", *labels], rows)]),
             Section("QD-score", [*note, Figure("qd_score.png", curves, alt="QD-score curves of every run")]),
-            Section("Result archives", [Figure("archives.png", heatmaps, alt="result archives side by side",
-                                               caption="Best objective per cell (grey: empty); red circles are failures.")]),
+            Section(
+                "Result archives",
+                [
+                    Figure(
+                        "archives.png",
+                        heatmaps,
+                        alt="result archives side by side",
+                        caption="Best objective per cell (grey: empty); red circles are failures.",
+                    )
+                ],
+            ),
         ],
     )
 

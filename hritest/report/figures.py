@@ -16,9 +16,9 @@ import matplotlib
 
 matplotlib.use("Agg")  # before pyplot: no display, same pixels everywhere
 
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from ribs.archives import GridArchive  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from ribs.archives import GridArchive
 
 CMAP = "viridis"
 DPI = 110
@@ -60,7 +60,7 @@ def archive_heatmaps(views: Sequence[ArchiveView]) -> bytes:
     fig, axes = plt.subplots(rows, columns, figsize=(5.2 * columns, 4.3 * rows), squeeze=False)
     for ax, view in zip(axes.flat, views):
         _draw_archive(ax, view)
-    for ax in axes.flat[len(views):]:
+    for ax in axes.flat[len(views) :]:
         ax.set_visible(False)
     return _png(fig)
 
@@ -132,20 +132,40 @@ def _mark_failures(ax: plt.Axes, view: ArchiveView, dims: int) -> None:
     points = np.clip(points, ranges[:, 0], ranges[:, 1])
     if dims == 1:
         points = np.column_stack([points[:, 0], np.full(len(points), 0.5)])
-    ax.scatter(points[:, 0], points[:, 1], s=30, facecolors="none", edgecolors=_FAILURE, linewidths=1.1,
-               label=f"failure ({len(points)})", zorder=3)
+    ax.scatter(
+        points[:, 0],
+        points[:, 1],
+        s=30,
+        facecolors="none",
+        edgecolors=_FAILURE,
+        linewidths=1.1,
+        label=f"failure ({len(points)})",
+        zorder=3,
+    )
     labelled = set(view.labelled)
     for (fid, _), (x, y) in zip(view.failures, points):
         if fid in labelled:
-            ax.annotate(str(fid), (x, y), xytext=(5, 5), textcoords="offset points", fontsize=8, color="white",
-                        bbox=dict(boxstyle="round,pad=0.15", fc="#8a1512", ec="none", alpha=0.9), zorder=4)
+            ax.annotate(
+                str(fid),
+                (x, y),
+                xytext=(5, 5),
+                textcoords="offset points",
+                fontsize=8,
+                color="white",
+                bbox=dict(boxstyle="round,pad=0.15", fc="#8a1512", ec="none", alpha=0.9),
+                zorder=4,
+            )
     ax.legend(loc="upper right", fontsize=8, framealpha=0.85)
 
 
 def _archive(view: ArchiveView, dims: int) -> GridArchive:
     """A ribs GridArchive over the first ``dims`` measures holding the view's elites."""
-    archive = GridArchive(solution_dim=1, dims=tuple(view.cells[:dims]), ranges=tuple(view.ranges[:dims]),
-                          qd_score_offset=view.objective_range[0])
+    archive = GridArchive(
+        solution_dim=1,
+        dims=tuple(view.cells[:dims]),
+        ranges=tuple(view.ranges[:dims]),
+        qd_score_offset=view.objective_range[0],
+    )
     if view.elites:
         objectives = np.array([o for o, _ in view.elites], dtype=float)
         measures = np.array([m[:dims] for _, m in view.elites], dtype=float)

@@ -133,10 +133,10 @@ def to_html(doc: Document) -> str:
     """The whole page, figures and style included."""
     body = "\n".join(_section_html(s) for s in doc.sections)
     return (
-        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
-        f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n"
+        '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
+        f'<meta name="viewport" content="width=device-width, initial-scale=1">\n'
         f"<title>{_e(doc.title)}</title>\n<style>{_STYLE}</style>\n</head>\n<body>\n<main>\n"
-        f"<h1>{_e(doc.title)}</h1>\n<p class=\"subtitle\">{_e(doc.subtitle)}</p>\n{body}\n"
+        f'<h1>{_e(doc.title)}</h1>\n<p class="subtitle">{_e(doc.subtitle)}</p>\n{body}\n'
         "</main>\n</body>\n</html>\n"
     )
 
@@ -147,11 +147,11 @@ def _section_html(section: Section) -> str:
 
 def _block_html(block: Block) -> str:
     if isinstance(block, Text):
-        return f"<p class=\"note\">{_e(block.text)}</p>" if block.note else f"<p>{_e(block.text)}</p>"
+        return f'<p class="note">{_e(block.text)}</p>' if block.note else f"<p>{_e(block.text)}</p>"
     if isinstance(block, Figure):
         data = base64.b64encode(block.png).decode("ascii")
         caption = f"<figcaption>{_e(block.caption)}</figcaption>" if block.caption else ""
-        return f"<figure><img alt=\"{_e(block.alt)}\" src=\"data:image/png;base64,{data}\">{caption}</figure>"
+        return f'<figure><img alt="{_e(block.alt)}" src="data:image/png;base64,{data}">{caption}</figure>'
     if isinstance(block, Details):
         inner = "\n".join(map(_block_html, block.blocks))
         return f"<details><summary>{_e(block.summary)}</summary>\n{inner}\n</details>"
@@ -164,12 +164,12 @@ def _block_html(block: Block) -> str:
 
 def _cell_html(cell: Cell) -> str:
     if isinstance(cell, Link):
-        return f"<td><a href=\"{_e(cell.href)}\">{_e(cell.text)}</a></td>"
+        return f'<td><a href="{_e(cell.href)}">{_e(cell.text)}</a></td>'
     if isinstance(cell, Badge):
-        return f"<td><span class=\"badge {'ok' if cell.ok else 'bad'}\">{_e(cell.text)}</span></td>"
+        return f'<td><span class="badge {"ok" if cell.ok else "bad"}">{_e(cell.text)}</span></td>'
     if isinstance(cell, Code):
         return f"<td><code>{_e(cell.text)}</code></td>"
-    return f"<td class=\"num\">{_e(cell)}</td>" if _numeric(cell) else f"<td>{_e(cell)}</td>"
+    return f'<td class="num">{_e(cell)}</td>' if _numeric(cell) else f"<td>{_e(cell)}</td>"
 
 
 def _numeric(text: str) -> bool:

@@ -34,12 +34,14 @@ class Backend:
         if self.workers < 1:
             raise HritestError(f"--workers must be at least 1, got {self.workers}")
         if self.cluster is None:
-            return Evaluator(ref=ref, make_executor=lambda: local_pool(self.workers), workers=self.workers,
-                             timeout=self.timeout)
+            return Evaluator(
+                ref=ref, make_executor=lambda: local_pool(self.workers), workers=self.workers, timeout=self.timeout
+            )
         client = _dask_client(self.cluster)
         workers = max(1, sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()))
-        return Evaluator(ref=ref, make_executor=client.get_executor, workers=workers, timeout=self.timeout,
-                         on_close=client.close)
+        return Evaluator(
+            ref=ref, make_executor=client.get_executor, workers=workers, timeout=self.timeout, on_close=client.close
+        )
 
 
 def _dask_client(address: str):  # noqa: ANN202 - distributed.Client
@@ -50,14 +52,24 @@ def _dask_client(address: str):  # noqa: ANN202 - distributed.Client
     try:
         return Client(address, timeout=10)
     except (OSError, TimeoutError) as exc:
-        raise HritestError(f"cannot reach the Dask scheduler at {address} ({exc}); check the address and that "
-                           "'dask scheduler' is running there") from None
+        raise HritestError(
+            f"cannot reach the Dask scheduler at {address} ({exc}); check the address and that "
+            "'dask scheduler' is running there"
+        ) from None
 
 
-def start(*, spec_file: Path, out: Path | None, root: Path = Path("runs"), algorithm: str | None = None,
-          budget: int | None = None, seed: int | None = None, backend: Backend = Backend(),
-          surrogate: SurrogateOptions = SurrogateOptions(),
-          progress: Callable[[Snapshot], None] = lambda s: None) -> Search:
+def start(
+    *,
+    spec_file: Path,
+    out: Path | None,
+    root: Path = Path("runs"),
+    algorithm: str | None = None,
+    budget: int | None = None,
+    seed: int | None = None,
+    backend: Backend = Backend(),
+    surrogate: SurrogateOptions = SurrogateOptions(),
+    progress: Callable[[Snapshot], None] = lambda s: None,
+) -> Search:
     """Runs a new search of the spec at ``spec_file``; arguments given override the spec's ``search``."""
     spec = load_spec(spec_file)
     domain = compile_spec(spec)
@@ -74,16 +86,16 @@ def start(*, spec_file: Path, out: Path | None, root: Path = Path("runs"), algor
     evaluator = backend.evaluator(ref)  # before the folder exists: a bad backend leaves nothing behind
     try:
         run = RunDirectory.create(root=root, spec_file=spec_file, name=spec.name, folder=out, meta=meta)
-        search = Search.new(domain=domain, run=run, algorithm=algorithm, budget=budget, seed=seed,
-                            options=surrogate)
+        search = Search.new(domain=domain, run=run, algorithm=algorithm, budget=budget, seed=seed, options=surrogate)
         search.run(evaluator, progress)
     finally:
         evaluator.close()
     return search
 
 
-def resume(*, run_path: Path, backend: Backend = Backend(),
-           progress: Callable[[Snapshot], None] = lambda s: None) -> Search:
+def resume(
+    *, run_path: Path, backend: Backend = Backend(), progress: Callable[[Snapshot], None] = lambda s: None
+) -> Search:
     """Continues the run at ``run_path`` from its last checkpoint.
 
     Raises:
@@ -94,7 +106,8 @@ def resume(*, run_path: Path, backend: Backend = Backend(),
     if original.is_file() and digest(original) != run.meta["spec_digest"]:
         raise RunDirectoryError(
             f"{original} changed since this run started; resuming would mix two different searches. "
-            f"Start a new run, or restore the spec (the run's copy is {run.path / 'spec.yaml'})")
+            f"Start a new run, or restore the spec (the run's copy is {run.path / 'spec.yaml'})"
+        )
     domain = _domain_of(run)
     ref = DomainRef(spec=str(run.path / "spec.yaml"), base=run.meta["spec_base"])
     evaluator = backend.evaluator(ref)

@@ -22,8 +22,7 @@ class UniformEmitter(EmitterBase):
     """
 
     def __init__(self, archive, *, lower: np.ndarray, upper: np.ndarray, batch_size: int, seed: int) -> None:  # noqa: ANN001
-        super().__init__(archive, solution_dim=archive.solution_dim, bounds=None, lower_bounds=None,
-                         upper_bounds=None)
+        super().__init__(archive, solution_dim=archive.solution_dim, bounds=None, lower_bounds=None, upper_bounds=None)
         self._lower, self._upper = np.asarray(lower), np.asarray(upper)
         self._batch_size = batch_size
         self._rng = np.random.default_rng(seed)
@@ -47,19 +46,34 @@ def scheduler(domain: Domain, algorithm: str, archive, *, seed: int) -> Schedule
     search = domain.spec.search
     seeds = np.random.SeedSequence(seed).generate_state(search.emitter.emitters + 1)
     if algorithm == "random":
-        emitters = [UniformEmitter(archive, lower=domain.space.lower, upper=domain.space.upper,
-                                   batch_size=search.random.batch_size, seed=int(seeds[0]))]
+        emitters = [
+            UniformEmitter(
+                archive,
+                lower=domain.space.lower,
+                upper=domain.space.upper,
+                batch_size=search.random.batch_size,
+                seed=int(seeds[0]),
+            )
+        ]
     elif algorithm == "map_elites":
         settings = search.map_elites
         start = np.array(settings.x0, dtype=float) if settings.x0 is not None else x0(domain)
-        emitters = [GaussianEmitter(archive, sigma=settings.sigma, x0=start, batch_size=settings.batch_size,
-                                    seed=int(seeds[0]))]
+        emitters = [
+            GaussianEmitter(archive, sigma=settings.sigma, x0=start, batch_size=settings.batch_size, seed=int(seeds[0]))
+        ]
     elif algorithm == "cma_mae":
         settings = search.emitter
         emitters = [
-            EvolutionStrategyEmitter(archive, x0=x0(domain), sigma0=settings.sigma0, ranker="imp",
-                                     selection_rule="mu", restart_rule="basic",
-                                     batch_size=settings.batch_size, seed=int(s))
+            EvolutionStrategyEmitter(
+                archive,
+                x0=x0(domain),
+                sigma0=settings.sigma0,
+                ranker="imp",
+                selection_rule="mu",
+                restart_rule="basic",
+                batch_size=settings.batch_size,
+                seed=int(s),
+            )
             for s in seeds[1:]
         ]
     else:

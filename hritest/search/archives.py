@@ -60,7 +60,8 @@ def region_measures(domain: Domain, regions: list[dict[str, str | None]]) -> np.
     names = workspace_objects(domain)
     index = {name: i for i, name in enumerate(domain.repair.region_names)}
     return np.array([[index.get(r.get(name), 0) for name in names] for r in regions], dtype=float).reshape(
-        len(regions), len(names))
+        len(regions), len(names)
+    )
 
 
 @dataclass(frozen=True)

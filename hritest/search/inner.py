@@ -65,15 +65,15 @@ class SurrogateObjective:
             if self.region_axes:
                 zeros = jacobian.new_zeros((len(x), measures.shape[1] - (out.shape[1] - 1), x.shape[1]))
                 jacobian = torch.cat([jacobian, zeros], dim=1)
-        return (out[:, 0].double().cpu().numpy(), measures.double().cpu().numpy(),
-                jacobian.double().cpu().numpy())
+        return (out[:, 0].double().cpu().numpy(), measures.double().cpu().numpy(), jacobian.double().cpu().numpy())
 
     def _with_regions(self, x: torch.Tensor, measures: torch.Tensor) -> torch.Tensor:
         return torch.cat([measures, self.penalty.regions(x)], dim=1) if self.region_axes else measures
 
 
-def exploit(domain: Domain, objective: SurrogateObjective, *, gradients: bool, iterations: int,
-            seed: int) -> GridArchive:
+def exploit(
+    domain: Domain, objective: SurrogateObjective, *, gradients: bool, iterations: int, seed: int
+) -> GridArchive:
     """Runs the inner loop from scratch and returns its archive of surrogate elites."""
     keep_freed_memory()
     settings = domain.spec.search.emitter
@@ -81,15 +81,35 @@ def exploit(domain: Domain, objective: SurrogateObjective, *, gradients: bool, i
     seeds = np.random.SeedSequence(seed).generate_state(settings.emitters)
     start = algorithms.x0(domain)
     if gradients:
-        emitters = [GradientArborescenceEmitter(archive, x0=start, sigma0=settings.sigma0, lr=settings.gradient_lr,
-                                                ranker="imp", grad_opt="gradient_ascent", restart_rule="basic",
-                                                normalize_grad=True, batch_size=settings.batch_size, seed=int(s))
-                    for s in seeds]
+        emitters = [
+            GradientArborescenceEmitter(
+                archive,
+                x0=start,
+                sigma0=settings.sigma0,
+                lr=settings.gradient_lr,
+                ranker="imp",
+                grad_opt="gradient_ascent",
+                restart_rule="basic",
+                normalize_grad=True,
+                batch_size=settings.batch_size,
+                seed=int(s),
+            )
+            for s in seeds
+        ]
     else:
-        emitters = [EvolutionStrategyEmitter(archive, x0=start, sigma0=settings.sigma0, ranker="imp",
-                                             selection_rule="mu", restart_rule="basic",
-                                             batch_size=settings.batch_size, seed=int(s))
-                    for s in seeds]
+        emitters = [
+            EvolutionStrategyEmitter(
+                archive,
+                x0=start,
+                sigma0=settings.sigma0,
+                ranker="imp",
+                selection_rule="mu",
+                restart_rule="basic",
+                batch_size=settings.batch_size,
+                seed=int(s),
+            )
+            for s in seeds
+        ]
     scheduler = Scheduler(archive, emitters)
     with warnings.catch_warnings():
         # From x0 (zeros, far outside every region in the collaboration specs) the first batches can
@@ -116,8 +136,9 @@ def downsample(domain: Domain, archive: GridArchive, *, rng: np.random.Generator
         return np.zeros((0, domain.space.dim))
     cells = domain.spec.search.surrogate.downsample_cells or list(domain.archive_dims)
     extra = archive.measure_dim - len(domain.measures)
-    blocks = GridArchive(solution_dim=1, dims=[*cells, *([1] * extra)],
-                         ranges=list(zip(archive.lower_bounds, archive.upper_bounds)))
+    blocks = GridArchive(
+        solution_dim=1, dims=[*cells, *([1] * extra)], ranges=list(zip(archive.lower_bounds, archive.upper_bounds))
+    )
     block = blocks.index_of(data["measures"])
     order = rng.permutation(len(block))
     _, first = np.unique(block[order], return_index=True)  # a random elite per block

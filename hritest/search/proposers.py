@@ -38,8 +38,10 @@ class ModelFree:
         bad = lo - (hi - lo)  # below any threshold: ranked last, never an elite
         ok = [r["status"] == "ok" and r["search_objective"] is not None for r in records]
         objective = np.array([max(r["search_objective"], bad) if good else bad for r, good in zip(records, ok)])
-        measures = np.array([r["measures"] if good else [m.range[0] for m in domain.measures]
-                             for r, good in zip(records, ok)], dtype=float).reshape(len(records), -1)
+        measures = np.array(
+            [r["measures"] if good else [m.range[0] for m in domain.measures] for r, good in zip(records, ok)],
+            dtype=float,
+        ).reshape(len(records), -1)
         regions = archives.region_measures(domain, [r["regions"] for r in records])
         self.scheduler.tell(objective, np.hstack([measures, regions]))
 
@@ -70,11 +72,16 @@ class SurrogateAssisted:
         self.iterations = options.inner_iterations or settings.inner_iterations
         self.initial = settings.initial_evaluations
         self.rng = np.random.default_rng(seed)
-        self.surrogate = Surrogate(bounds=(domain.space.lower, domain.space.upper),
-                                   channels=len(domain.grids), outputs=1 + len(domain.measures),
-                                   epochs=settings.epochs, batch_size=settings.batch_size,
-                                   learning_rate=settings.learning_rate, device=pick_device(options.device),
-                                   seed=seed)
+        self.surrogate = Surrogate(
+            bounds=(domain.space.lower, domain.space.upper),
+            channels=len(domain.grids),
+            outputs=1 + len(domain.measures),
+            epochs=settings.epochs,
+            batch_size=settings.batch_size,
+            learning_rate=settings.learning_rate,
+            device=pick_device(options.device),
+            seed=seed,
+        )
         self.outer = 0
         self.pending_predictions: np.ndarray | None = None
         self.held_out: list[tuple[int, list[float], list[float]]] = []  # (outer iteration, predicted, true)
@@ -89,11 +96,22 @@ class SurrogateAssisted:
         theta, grids, targets = search.dataset()
         fit = self.surrogate.fit(theta, grids, targets)
         self.outer += 1
-        self.fits.append({"outer_iteration": self.outer, "samples": fit.samples,
-                          "occupancy_loss": fit.occupancy_loss, "predictor_loss": fit.predictor_loss})
+        self.fits.append(
+            {
+                "outer_iteration": self.outer,
+                "samples": fit.samples,
+                "occupancy_loss": fit.occupancy_loss,
+                "predictor_loss": fit.predictor_loss,
+            }
+        )
         objective = inner.SurrogateObjective(search.domain, self.surrogate)
-        archive = inner.exploit(search.domain, objective, gradients=self.gradients, iterations=self.iterations,
-                                seed=int(self.rng.integers(2**31)))
+        archive = inner.exploit(
+            search.domain,
+            objective,
+            gradients=self.gradients,
+            iterations=self.iterations,
+            seed=int(self.rng.integers(2**31)),
+        )
         proposals = inner.downsample(search.domain, archive, rng=self.rng)
         if len(proposals) == 0:  # an empty surrogate archive: explore instead of stalling
             proposals = self.rng.uniform(space.lower, space.upper, size=(8, space.dim))
@@ -116,8 +134,10 @@ class SurrogateAssisted:
         if not self.held_out:
             return {"held_out": 0, "fits": self.fits}
         outers = sorted({outer for outer, _, _ in self.held_out})
-        per_outer = [{"outer_iteration": outer, **_errors(domain, [h for h in self.held_out if h[0] == outer])}
-                     for outer in outers]
+        per_outer = [
+            {"outer_iteration": outer, **_errors(domain, [h for h in self.held_out if h[0] == outer])}
+            for outer in outers
+        ]
         return {**_errors(domain, self.held_out), "per_outer_iteration": per_outer, "fits": self.fits}
 
 

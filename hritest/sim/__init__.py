@@ -28,8 +28,20 @@ if TYPE_CHECKING:
 
 _LAZY = {
     "twist_to_joint_velocity": "hritest.sim.control",
-    **dict.fromkeys(("DT", "HAND_RADIUS", "ArmModelError", "Geom", "SceneReplay", "TwistStep", "World",
-                     "WorldModelError", "shared_world"), "hritest.sim.world"),
+    **dict.fromkeys(
+        (
+            "DT",
+            "HAND_RADIUS",
+            "ArmModelError",
+            "Geom",
+            "SceneReplay",
+            "TwistStep",
+            "World",
+            "WorldModelError",
+            "shared_world",
+        ),
+        "hritest.sim.world",
+    ),
 }
 
 

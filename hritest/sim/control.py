@@ -69,8 +69,16 @@ _INSIDE, _OUTSIDE, _UNSOLVED = 0, 1, 2
 
 
 @kernel
-def _bounds_and_solve(jacobian: np.ndarray, twist: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-                      speeds: np.ndarray, dt: float, margin: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+def _bounds_and_solve(
+    jacobian: np.ndarray,
+    twist: np.ndarray,
+    q: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    speeds: np.ndarray,
+    dt: float,
+    margin: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """The velocity bounds, and the unconstrained solution with whether it keeps to them."""
     # Speed allowed towards each limit: none within `margin` of it, and never more than the room
     # left in one tick. Unlimited joints have infinite room.
@@ -84,7 +92,7 @@ def _bounds_and_solve(jacobian: np.ndarray, twist: np.ndarray, q: np.ndarray, lo
         return lo, hi, np.zeros(n), _UNSOLVED
     try:
         qdot = np.linalg.solve(jacobian, twist)  # LAPACK's gesv, as np.linalg.solve
-    except Exception:  # noqa: BLE001 - numba raises LinAlgError for an exactly singular matrix
+    except Exception:
         return lo, hi, np.zeros(n), _UNSOLVED
     for i in range(n):
         if qdot[i] < lo[i] or qdot[i] > hi[i]:
@@ -93,8 +101,9 @@ def _bounds_and_solve(jacobian: np.ndarray, twist: np.ndarray, q: np.ndarray, lo
 
 
 @kernel
-def _limit_and_scale(jacobian: np.ndarray, twist: np.ndarray, qdot: np.ndarray, speeds: np.ndarray,
-                     scale_at: float) -> tuple[np.ndarray, bool]:
+def _limit_and_scale(
+    jacobian: np.ndarray, twist: np.ndarray, qdot: np.ndarray, speeds: np.ndarray, scale_at: float
+) -> tuple[np.ndarray, bool]:
     """The reference's "joint limit reached" test, then the scaling to ``scale_at`` of the limits."""
     achieved = np.ascontiguousarray(jacobian[:3]) @ qdot
     squares, asked_any = 0.0, False
@@ -111,9 +120,7 @@ def _limit_and_scale(jacobian: np.ndarray, twist: np.ndarray, qdot: np.ndarray, 
     return qdot, limit_reached
 
 
-def _bounded_least_squares(
-    jacobian: np.ndarray, twist: np.ndarray, lo: np.ndarray, hi: np.ndarray
-) -> np.ndarray:
+def _bounded_least_squares(jacobian: np.ndarray, twist: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     # BVLS needs lo < hi strictly; a joint with no room either way is pinned at its bound.
     free = lo < hi
     qdot = lo.copy()

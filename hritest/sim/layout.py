@@ -101,8 +101,17 @@ class WorldLayout:
         )
 
     def __hash__(self) -> int:  # ``bodies`` is a dict; hash what identifies the layout
-        return hash((self.model, tuple(sorted(self.bodies.items())), self.table, self.regions, self.objects,
-                     self.arm, self.hand_start))
+        return hash(
+            (
+                self.model,
+                tuple(sorted(self.bodies.items())),
+                self.table,
+                self.regions,
+                self.objects,
+                self.arm,
+                self.hand_start,
+            )
+        )
 
 
 @dataclass(frozen=True, kw_only=True)

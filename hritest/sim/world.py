@@ -401,8 +401,11 @@ class SceneReplay:
                 f"mocap positions per tick; its layout compiles to ({m.nq},) and ({m.nmocap}, 3). Were the "
                 "world's MJCF files changed since it was recorded? Run the task again."
             )
-        shown = [g for g in range(m.ngeom) if int(m.geom_type[g]) in _KINDS and _colour(m, g)[3] > 0.0
-                 and m.geom_group[g] < _FIRST_HIDDEN_GROUP]
+        shown = [
+            g
+            for g in range(m.ngeom)
+            if int(m.geom_type[g]) in _KINDS and _colour(m, g)[3] > 0.0 and m.geom_group[g] < _FIRST_HIDDEN_GROUP
+        ]
         body_ids = sorted({int(m.geom_bodyid[g]) for g in shown})
         names = {body: m.body(body).name or f"body{body}" for body in body_ids}
         self._model, self._data, self._trace = m, world._data, trace
@@ -423,8 +426,16 @@ class SceneReplay:
 
 
 @kernel
-def _integrate(jac: np.ndarray, qdot: np.ndarray, q: np.ndarray, dt: float, floor: np.ndarray, ceiling: np.ndarray,
-               qpos: np.ndarray, qadr: np.ndarray) -> np.ndarray:
+def _integrate(
+    jac: np.ndarray,
+    qdot: np.ndarray,
+    q: np.ndarray,
+    dt: float,
+    floor: np.ndarray,
+    ceiling: np.ndarray,
+    qpos: np.ndarray,
+    qadr: np.ndarray,
+) -> np.ndarray:
     """``J qdot`` (the twist achieved), then ``q <- clip(q + qdot dt, floor, ceiling)``, in ``qpos`` too."""
     achieved = jac @ qdot
     for i in range(len(q)):
@@ -434,8 +445,14 @@ def _integrate(jac: np.ndarray, qdot: np.ndarray, q: np.ndarray, dt: float, floo
 
 
 @kernel
-def _gather(jac_full: np.ndarray, dofadr: np.ndarray, jac: np.ndarray, site_rotation: np.ndarray,
-            site_position: np.ndarray, ee_pose: np.ndarray) -> None:
+def _gather(
+    jac_full: np.ndarray,
+    dofadr: np.ndarray,
+    jac: np.ndarray,
+    site_rotation: np.ndarray,
+    site_position: np.ndarray,
+    ee_pose: np.ndarray,
+) -> None:
     """The arm's Jacobian columns out of MuJoCo's full one, and the EE site's pose as 4x4."""
     for i in range(len(dofadr)):
         jac[:, i] = jac_full[:, dofadr[i]]
@@ -501,8 +518,10 @@ def _scene_spec(path: str | None) -> mujoco.MjSpec:
 def _attach_arm(spec: mujoco.MjSpec, mount: ArmMount) -> tuple[list[str], np.ndarray | None]:
     """Attaches the arm at the origin; returns what :func:`_locate_arm` needs from its file:
     its site names and its joint speed limits (``None`` if it has none)."""
-    arm = mujoco.MjSpec.from_string(ARM_MJCF) if mount.mjcf is None else _load(
-        mount.mjcf, "arm MJCF (world.arm.model in the spec)"
+    arm = (
+        mujoco.MjSpec.from_string(ARM_MJCF)
+        if mount.mjcf is None
+        else _load(mount.mjcf, "arm MJCF (world.arm.model in the spec)")
     )
     sites = [site.name for site in arm.sites if site.name]
     speeds = arm.numeric("velocity_limits")
@@ -552,8 +571,9 @@ def _add_workspace(spec: mujoco.MjSpec, layout: WorldLayout) -> None:
         )
 
 
-def _add_box(body: mujoco.MjsBody, box: Box, plain: mujoco.MjSpec, *, pos: tuple[float, float, float],
-             collides: bool) -> None:
+def _add_box(
+    body: mujoco.MjsBody, box: Box, plain: mujoco.MjSpec, *, pos: tuple[float, float, float], collides: bool
+) -> None:
     body.add_geom(
         default=plain.default,
         name=box.name,
@@ -566,13 +586,17 @@ def _add_box(body: mujoco.MjsBody, box: Box, plain: mujoco.MjSpec, *, pos: tuple
     )
 
 
-def _locate_arm(model: mujoco.MjModel, mount: ArmMount, first_body: int, sites: list[str],
-                speeds: np.ndarray | None) -> _Arm:
+def _locate_arm(
+    model: mujoco.MjModel, mount: ArmMount, first_body: int, sites: list[str], speeds: np.ndarray | None
+) -> _Arm:
     """The arm's joints, site, limits and top-level bodies in the compiled model."""
     source = mount.mjcf or _BUILT_IN_ARM
     bodies = np.arange(first_body, model.nbody)
-    hinges = [j for j in range(model.njnt)
-              if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE and model.jnt_bodyid[j] >= first_body]
+    hinges = [
+        j
+        for j in range(model.njnt)
+        if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE and model.jnt_bodyid[j] >= first_body
+    ]
     if not hinges:
         raise ArmModelError(f"The arm MJCF {source} has no hinge joints to drive.")
     site = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, _ARM_PREFIX + mount.ee_site)
@@ -642,8 +666,8 @@ def _move_free_joint(model: mujoco.MjModel, body: int, pos: np.ndarray, quat: np
     """A free-floating body's pose is its joint's, not its ``body_pos``: set its reset value too."""
     if model.body_jntnum[body] and model.jnt_type[model.body_jntadr[body]] == mujoco.mjtJoint.mjJNT_FREE:
         adr = model.jnt_qposadr[model.body_jntadr[body]]
-        qpos0[adr:adr + 3] = pos
-        qpos0[adr + 3:adr + 7] = quat
+        qpos0[adr : adr + 3] = pos
+        qpos0[adr + 3 : adr + 7] = quat
 
 
 def _colour(model: mujoco.MjModel, geom: int) -> np.ndarray:
@@ -658,8 +682,8 @@ def _geom(model: mujoco.MjModel, geom: int, body: str) -> Geom:
     if kind == "mesh":
         mesh = model.geom_dataid[geom]
         first_vertex, first_face = model.mesh_vertadr[mesh], model.mesh_faceadr[mesh]
-        vertices = model.mesh_vert[first_vertex:first_vertex + model.mesh_vertnum[mesh]].copy()
-        faces = model.mesh_face[first_face:first_face + model.mesh_facenum[mesh]].copy()
+        vertices = model.mesh_vert[first_vertex : first_vertex + model.mesh_vertnum[mesh]].copy()
+        faces = model.mesh_face[first_face : first_face + model.mesh_facenum[mesh]].copy()
     return Geom(
         body=body,
         kind=kind,

@@ -12,6 +12,7 @@ from hritest.spec.models import Spec
 from hritest.spec.references import check_references
 from hritest.spec.source import SourceMap, read_yaml
 
+
 def load_spec(path: str | Path) -> Spec:
     """Reads and validates the spec at ``path``.
 
@@ -50,9 +51,7 @@ def _data_path(loc: tuple, data: Any) -> tuple:
     path: list[str | int] = []
     node = data
     for part in loc:
-        if isinstance(node, dict) and part in node:
-            node = node[part]
-        elif isinstance(node, list) and isinstance(part, int) and 0 <= part < len(node):
+        if (isinstance(node, dict) and part in node) or (isinstance(node, list) and isinstance(part, int) and 0 <= part < len(node)):
             node = node[part]
         else:
             continue
@@ -70,7 +69,7 @@ def _reword(error: dict, path: tuple, data: Any) -> str:
         return f"missing required key {error['loc'][-1]!r}"
     msg = error["msg"]
     if msg.startswith("Value error, "):
-        msg = msg[len("Value error, "):]
+        msg = msg[len("Value error, ") :]
     if kind not in ("value_error", "missing", "union_tag_invalid", "union_tag_not_found"):
         msg = f"{msg} (got {error.get('input')!r})"
     return msg

@@ -100,8 +100,10 @@ class ArmSpec(Strict):
     one angle per joint) to move it per scenario.
     """
 
-    model: str | None = Field(None, description="arm MJCF, relative to the spec's folder; hinge joints, "
-                                                "a tool site and a velocity_limits numeric")
+    model: str | None = Field(
+        None,
+        description="arm MJCF, relative to the spec's folder; hinge joints, a tool site and a velocity_limits numeric",
+    )
     ee_site: str = Field("ee", description="the name of the arm's tool site")
     base: Vec3 = Field(ROBOT_BASE, description="where the arm file's origin stands (m)")
     yaw: float = Field(0.0, description="rad, about world z")
@@ -155,8 +157,9 @@ class ParameterSpec(Strict):
         lo, hi = self.bounds
         outside = [v for v in values if not lo <= v <= hi]
         if outside:
-            raise ValueError(f"nominal {outside} lies outside the bounds [{lo}, {hi}]; move it inside or widen "
-                             "the bounds")
+            raise ValueError(
+                f"nominal {outside} lies outside the bounds [{lo}, {hi}]; move it inside or widen the bounds"
+            )
         return self
 
 

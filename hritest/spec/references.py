@@ -7,8 +7,8 @@ from __future__ import annotations
 
 from collections.abc import Collection, Iterator
 
-from hritest.spec import expr
 from hritest.sim.layout import ARM_ATTRIBUTES, BODY_ATTRIBUTES
+from hritest.spec import expr
 from hritest.spec.models import BoundsConstraint, Spec
 
 AGENT_TARGETS = ("human", "robot", "task")
@@ -48,9 +48,12 @@ def _duplicates(spec: Spec) -> Found:
     for field, items in (("parameters", spec.parameters), ("measures", spec.measures)):
         for i, item in enumerate(items):
             if item.name in seen:
-                yield (field, i, "name"), (
-                    f"duplicate name {item.name!r}: parameter and measure names must be unique "
-                    "and may not be 'objective'"
+                yield (
+                    (field, i, "name"),
+                    (
+                        f"duplicate name {item.name!r}: parameter and measure names must be unique "
+                        "and may not be 'objective'"
+                    ),
                 )
             seen.add(item.name)
 
@@ -82,20 +85,29 @@ def _bindings(spec: Spec) -> Found:
                 yield ("parameters", i, "size"), f"{param.bind!r} is one number; remove 'size' or set it to 1"
         elif head in objects:
             if attribute not in OBJECT_ATTRIBUTES:
-                yield path, (f"an object parameter binds {', '.join(f'{head}.{a}' for a in OBJECT_ATTRIBUTES)}, "
-                             f"not {param.bind!r}")
+                yield (
+                    path,
+                    (
+                        f"an object parameter binds {', '.join(f'{head}.{a}' for a in OBJECT_ATTRIBUTES)}, "
+                        f"not {param.bind!r}"
+                    ),
+                )
             elif param.size != 1:
                 yield ("parameters", i, "size"), f"{param.bind!r} is one number; remove 'size' or set it to 1"
         elif model is not None:  # a body of the world model: its name is checked against the model file
             if attribute not in BODY_ATTRIBUTES:
-                yield path, (f"a body of the world model binds {', '.join(BODY_ATTRIBUTES)}, "
-                             f"not {attribute!r}")
+                yield path, (f"a body of the world model binds {', '.join(BODY_ATTRIBUTES)}, not {attribute!r}")
             elif param.size != 1:
                 yield ("parameters", i, "size"), f"{param.bind!r} is one number; remove 'size' or set it to 1"
         else:
             known = ", ".join(sorted(objects) + list(AGENT_TARGETS) + ([ARM_TARGET] if has_arm(spec) else []))
-            yield path, (f"unknown target {head!r} in {param.bind!r}; bind to one of: {known} "
-                         "(or to a body of a world model named in world.model)")
+            yield (
+                path,
+                (
+                    f"unknown target {head!r} in {param.bind!r}; bind to one of: {known} "
+                    "(or to a body of a world model named in world.model)"
+                ),
+            )
         if param.bind in bound:
             yield path, f"{param.bind!r} is already bound by parameters[{bound[param.bind]}]"
         bound.setdefault(param.bind, i)
@@ -111,8 +123,12 @@ def _constraints(spec: Spec) -> Found:
     for i, constraint in enumerate(spec.constraints):
         for j, name in enumerate(getattr(constraint, "objects", [])):
             if name not in objects:
-                yield ("constraints", i, "objects", j), (
-                    f"unknown object {name!r}; the objects are {', '.join(sorted(objects)) or 'none: add them under objects'}")
+                yield (
+                    ("constraints", i, "objects", j),
+                    (
+                        f"unknown object {name!r}; the objects are {', '.join(sorted(objects)) or 'none: add them under objects'}"
+                    ),
+                )
         for j, name in enumerate(getattr(constraint, "regions", [])):
             if name not in region_names:
                 known = ", ".join(sorted(region_names)) or "none: add them under workspace.regions"
@@ -134,17 +150,23 @@ def _search(spec: Spec) -> Found:
         yield ("search", "map_elites", "x0"), f"has {len(me_x0)} values but theta has {dim} components"
     sigma = spec.search.map_elites.sigma
     if isinstance(sigma, list) and len(sigma) != dim:
-        yield ("search", "map_elites", "sigma"), (
-            f"has {len(sigma)} values but theta has {dim} components; give one number or {dim}")
+        yield (
+            ("search", "map_elites", "sigma"),
+            (f"has {len(sigma)} values but theta has {dim} components; give one number or {dim}"),
+        )
     cells = spec.search.surrogate.downsample_cells
     if cells is not None:
         if len(cells) != len(spec.measures):
-            yield ("search", "surrogate", "downsample_cells"), (
-                f"has {len(cells)} values, one per measure is needed ({len(spec.measures)})")
+            yield (
+                ("search", "surrogate", "downsample_cells"),
+                (f"has {len(cells)} values, one per measure is needed ({len(spec.measures)})"),
+            )
         for i, (n, measure) in enumerate(zip(cells, spec.measures)):
             if n > measure.cells:
-                yield ("search", "surrogate", "downsample_cells", i), (
-                    f"{n} cells is more than measure {measure.name!r} has ({measure.cells})")
+                yield (
+                    ("search", "surrogate", "downsample_cells", i),
+                    (f"{n} cells is more than measure {measure.name!r} has ({measure.cells})"),
+                )
 
 
 def _expression_names(spec: Spec, metrics: set[str]) -> Found:
@@ -157,6 +179,10 @@ def _expression_names(spec: Spec, metrics: set[str]) -> Found:
     for path, text, scope, condition in checks:
         unknown = sorted(expr.parse(text, condition=condition).names - scope)
         if unknown:
-            yield path, (
-                f"unknown name{'s' if len(unknown) > 1 else ''} {', '.join(map(repr, unknown))}; "
-                f"known here: {', '.join(sorted(scope))}")
+            yield (
+                path,
+                (
+                    f"unknown name{'s' if len(unknown) > 1 else ''} {', '.join(map(repr, unknown))}; "
+                    f"known here: {', '.join(sorted(scope))}"
+                ),
+            )

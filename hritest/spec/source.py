@@ -77,12 +77,23 @@ def read_yaml(path: str | Path) -> tuple[dict[str, Any], SourceMap]:
     except yaml.YAMLError as exc:
         raise SpecError(Issue((), f"is not valid YAML: {exc}"), file=file) from None
     if data is None:
-        raise SpecError(Issue((), "is empty; a spec needs at least task, workspace, objects, parameters, "
-                                  "robot, human, objective, measures and failure (see specs/teleop.yaml)"),
-                        file=file)
+        raise SpecError(
+            Issue(
+                (),
+                "is empty; a spec needs at least task, workspace, objects, parameters, "
+                "robot, human, objective, measures and failure (see specs/teleop.yaml)",
+            ),
+            file=file,
+        )
     if not isinstance(data, dict):
         kind = type(data).__name__
-        raise SpecError(Issue((), f"is not a hritest spec: the top level is a {kind}, expected a mapping of "
-                                  "keys such as 'task:' and 'objects:'",
-                              Location(file, 1, 1)), file=file)
+        raise SpecError(
+            Issue(
+                (),
+                f"is not a hritest spec: the top level is a {kind}, expected a mapping of "
+                "keys such as 'task:' and 'objects:'",
+                Location(file, 1, 1),
+            ),
+            file=file,
+        )
     return data, SourceMap(file, root)

@@ -59,8 +59,9 @@ _TAPS = ({0: 3, 1: 1}, {1: 2, 2: 0})
 
 def _transposed_as_linear(conv: nn.ConvTranspose2d, bn: nn.BatchNorm2d) -> nn.Linear:
     """A kernel-k transposed convolution of a 1x1 image is a linear map to ``cout * k * k`` values."""
-    weight, bias = fuse_conv_bn_weights(conv.weight, conv.bias, bn.running_mean, bn.running_var, bn.eps,
-                                        bn.weight, bn.bias, transpose=True)
+    weight, bias = fuse_conv_bn_weights(
+        conv.weight, conv.bias, bn.running_mean, bn.running_var, bn.eps, bn.weight, bn.bias, transpose=True
+    )
     cin, cout, k, _ = weight.shape
     linear = nn.Linear(cin, cout * k * k, device=weight.device)
     with torch.no_grad():
@@ -72,8 +73,9 @@ def _transposed_as_linear(conv: nn.ConvTranspose2d, bn: nn.BatchNorm2d) -> nn.Li
 def _transposed_as_shuffle(conv: nn.ConvTranspose2d, bn: nn.BatchNorm2d) -> nn.Conv2d:
     """The 3x3 convolution whose pixel shuffle (factor 2) is ``bn(conv(x))``."""
     assert conv.stride == (2, 2) and conv.padding == (1, 1) and conv.kernel_size == (4, 4)
-    weight, bias = fuse_conv_bn_weights(conv.weight, conv.bias, bn.running_mean, bn.running_var, bn.eps,
-                                        bn.weight, bn.bias, transpose=True)
+    weight, bias = fuse_conv_bn_weights(
+        conv.weight, conv.bias, bn.running_mean, bn.running_var, bn.eps, bn.weight, bn.bias, transpose=True
+    )
     cin, cout = weight.shape[:2]
     phases = weight.new_zeros((cout, 2, 2, cin, 3, 3))
     for row, row_taps in enumerate(_TAPS):
@@ -98,8 +100,9 @@ class FastOccupancy(nn.Module):
         norms = [m for m in layers if isinstance(m, nn.BatchNorm2d)]
         self.first = _transposed_as_linear(convs[0], norms[0])
         self.channels = convs[0].out_channels
-        self.ups = nn.ModuleList(_transposed_as_shuffle(c, n).to(memory_format=torch.channels_last)
-                                 for c, n in zip(convs[1:], norms[1:]))
+        self.ups = nn.ModuleList(
+            _transposed_as_shuffle(c, n).to(memory_format=torch.channels_last) for c, n in zip(convs[1:], norms[1:])
+        )
 
     def forward(self, theta: torch.Tensor) -> torch.Tensor:
         x = torch.relu(self.first(theta)).view(len(theta), self.channels, 4, 4)
@@ -146,8 +149,9 @@ class FastSurrogate(nn.Module):
     networks, refolded; ``theta -> predictor(theta, None) * scale + shift`` for a task without grids
     (``occupancy`` None). A snapshot: build a new one after training."""
 
-    def __init__(self, occupancy: OccupancyNet | None, predictor: PredictNet, *, scale: torch.Tensor,
-                 shift: torch.Tensor) -> None:
+    def __init__(
+        self, occupancy: OccupancyNet | None, predictor: PredictNet, *, scale: torch.Tensor, shift: torch.Tensor
+    ) -> None:
         super().__init__()
         if (occupancy is None) != (predictor.grid is None):
             raise ValueError("the predictor has a grid branch exactly when there is an occupancy network")

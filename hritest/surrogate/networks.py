@@ -23,7 +23,9 @@ GRID = 32
 
 def _up(cin: int, cout: int, *, first: bool = False, last: bool = False) -> list[nn.Module]:
     layers: list[nn.Module] = [
-        nn.ConvTranspose2d(cin, cout, 4, 1, 0, bias=False) if first else nn.ConvTranspose2d(cin, cout, 4, 2, 1, bias=False),
+        nn.ConvTranspose2d(cin, cout, 4, 1, 0, bias=False)
+        if first
+        else nn.ConvTranspose2d(cin, cout, 4, 2, 1, bias=False),
         nn.BatchNorm2d(cout),
     ]
     return layers if last else [*layers, nn.ReLU()]
@@ -43,7 +45,8 @@ class OccupancyNet(nn.Module):
         if channels < 1:  # a task without grids has no occupancy network (see the module docstring)
             raise ValueError(f"an occupancy network needs at least one grid channel, got {channels}")
         self.layers = nn.Sequential(
-            *_up(inputs, 32, first=True), *_up(32, 16), *_up(16, 8), *_up(8, channels, last=True))
+            *_up(inputs, 32, first=True), *_up(32, 16), *_up(16, 8), *_up(8, channels, last=True)
+        )
 
     def forward(self, theta: torch.Tensor) -> torch.Tensor:
         logits = self.layers(theta[:, :, None, None])
@@ -59,11 +62,20 @@ class PredictNet(nn.Module):
     def __init__(self, *, inputs: int, channels: int, outputs: int) -> None:
         super().__init__()
         self.theta = nn.Sequential(nn.Linear(inputs, 128), nn.BatchNorm1d(128), nn.ReLU())
-        self.grid = nn.Sequential(*_down(channels, 16), *_down(16, 32), *_down(32, 64), *_down(64, 128, last=True),
-                                  nn.Flatten()) if channels else None
+        self.grid = (
+            nn.Sequential(
+                *_down(channels, 16), *_down(16, 32), *_down(32, 64), *_down(64, 128, last=True), nn.Flatten()
+            )
+            if channels
+            else None
+        )
         self.head = nn.Sequential(
-            nn.Linear(256 if channels else 128, 256), nn.BatchNorm1d(256), nn.ReLU(),
-            nn.Linear(256, 128), nn.BatchNorm1d(128), nn.ReLU(),
+            nn.Linear(256 if channels else 128, 256),
+            nn.BatchNorm1d(256),
+            nn.ReLU(),
+            nn.Linear(256, 128),
+            nn.BatchNorm1d(128),
+            nn.ReLU(),
             nn.Linear(128, outputs),
         )
 

@@ -40,8 +40,8 @@ class Penalty:
 
     def _distances(self, theta: torch.Tensor) -> torch.Tensor:
         """``(batch, objects, regions)`` squared distance of each object's centre to each region."""
-        xy = theta[:, self.objects]                          # (batch, objects, 2)
-        lo, hi = self.boxes[..., 0], self.boxes[..., 1]      # (objects, regions, 2)
+        xy = theta[:, self.objects]  # (batch, objects, 2)
+        lo, hi = self.boxes[..., 0], self.boxes[..., 1]  # (objects, regions, 2)
         gap = torch.relu(lo - xy[:, :, None, :]) + torch.relu(xy[:, :, None, :] - hi)
         squared = (gap**2).sum(dim=-1)
         return torch.where(self.allowed, squared, torch.full_like(squared, torch.inf))

@@ -66,7 +66,7 @@ def blocks(states: list[str]) -> list[tuple[str, int, int]]:
 
 
 def goal_xy(theta, g: int) -> np.ndarray:
-    return np.array(theta[2 * g:2 * g + 2])
+    return np.array(theta[2 * g : 2 * g + 2])
 
 
 # --- the human ----------------------------------------------------------------------------
@@ -83,7 +83,7 @@ def test_the_mdp_human_works_on_each_of_its_goals_in_order(theta):
     assert len(working) == 3
     for g, (start, n) in enumerate(working):
         assert n == round(5.0 / DT)  # human_work_time
-        hand = rollout.trajectories["human/hand"][start:start + n, :2]
+        hand = rollout.trajectories["human/hand"][start : start + n, :2]
         # At its box (the 1 cm arrival tolerance) and still while it works.
         assert np.linalg.norm(hand - goal_xy(theta, g), axis=1).max() < 0.011
         assert np.ptp(hand, axis=0).max() == 0.0
@@ -93,9 +93,11 @@ def test_the_mdp_human_works_on_each_of_its_goals_in_order(theta):
 # --- waiting for a box --------------------------------------------------------------------
 
 
-@pytest.mark.parametrize(("theta", "waiter", "other"), [(ROBOT_WAITS, "robot", "human"),
-                                                       (HUMAN_WAITS, "human", "robot")],
-                         ids=["robot-waits", "human-waits"])
+@pytest.mark.parametrize(
+    ("theta", "waiter", "other"),
+    [(ROBOT_WAITS, "robot", "human"), (HUMAN_WAITS, "human", "robot")],
+    ids=["robot-waits", "human-waits"],
+)
 def test_both_wanting_the_same_box_makes_the_second_one_wait(theta, waiter, other):
     evaluation, rollout = run(theta)
     m = evaluation.metrics
@@ -109,7 +111,9 @@ def test_both_wanting_the_same_box_makes_the_second_one_wait(theta, waiter, othe
     assert len(waiting) * DT == pytest.approx(m[f"{waiter}_wait_time"], abs=DT + 1e-9)
     assert np.all(np.diff(waiting) == 1)  # one stretch
     # ... spent standing at a box ...
-    position = (rollout.trajectories["robot/ee"] if waiter == "robot" else rollout.trajectories["human/hand"])[waiting, :2]
+    position = (rollout.trajectories["robot/ee"] if waiter == "robot" else rollout.trajectories["human/hand"])[
+        waiting, :2
+    ]
     assert np.ptp(position, axis=0).max() == 0.0
     distances = [np.linalg.norm(position[0] - goal_xy(theta, g)) for g in range(3)]
     g = int(np.argmin(distances))
@@ -169,7 +173,7 @@ def test_a_replan_pauses_the_robot_as_long_as_replan_time_like_work_and_reset():
     for state, start, n in blocks(rollout.states["robot"])[:-1]:  # the last block is cut by the episode end
         lengths.setdefault(state, set()).add(n)
         if state == "replanning":
-            assert np.ptp(rollout.trajectories["robot/ee"][start:start + n], axis=0).max() == 0.0  # it holds still
+            assert np.ptp(rollout.trajectories["robot/ee"][start : start + n], axis=0).max() == 0.0  # it holds still
     assert lengths["working"] == {120}
     assert lengths["resetting"] == {120}
     assert lengths["replanning"] == {120}
@@ -218,10 +222,10 @@ def test_a_faster_human_finishes_its_walking_sooner():
 
     assert walking(fast_rollout) < walking(slow_rollout) / 2  # 4x the speed, same route
     assert fast.metrics["human_path_length"] == pytest.approx(slow.metrics["human_path_length"], rel=0.05)
-    assert (event_time(fast_rollout, "human starts work on goal0")
-            < event_time(slow_rollout, "human starts work on goal0"))
-    assert (event_time(fast_rollout, "human finished goal2")
-            < event_time(slow_rollout, "human finished goal2"))
+    assert event_time(fast_rollout, "human starts work on goal0") < event_time(
+        slow_rollout, "human starts work on goal0"
+    )
+    assert event_time(fast_rollout, "human finished goal2") < event_time(slow_rollout, "human finished goal2")
     # Speed 0.5 with rationality 10^3 is the fixed human of collab.yaml: the same episode.
     fixed, _ = run(ALL_WS1)
     assert slow.objective == fixed.objective

@@ -62,8 +62,17 @@ def event_times(rollout, text: str) -> list[float]:
 
 def test_the_spec_compiles_with_its_nine_parameters():
     d = domain()
-    assert d.space.labels == ["person_x", "person_y", "person_yaw", "reaction_delay", "patience", "reach_speed",
-                              "spot_forward", "spot_height", "robot_speed"]
+    assert d.space.labels == [
+        "person_x",
+        "person_y",
+        "person_yaw",
+        "reaction_delay",
+        "patience",
+        "reach_speed",
+        "spot_forward",
+        "spot_height",
+        "robot_speed",
+    ]
     assert d.task_cls.__name__ == "HandoverTask" and d.grids == {"robot": (32, 32), "human": (32, 32)}
     np.testing.assert_allclose(d.nominal, NOMINAL)
 
@@ -117,7 +126,7 @@ def test_out_of_reach_the_arm_stretches_towards_the_hand_and_waits_at_its_edge()
     assert evaluation.metrics["reach_distance"] > 1.0  # ... for a hand farther than that
     # It waits there, still, while the person holds the hand out of reach (1 s before withdrawing).
     withdrawn = round(event_times(rollout, "person withdraws the hand")[0] / DT)
-    assert np.ptp(ee[withdrawn - round(1.0 / DT):withdrawn + 1], axis=0).max() < 1e-3
+    assert np.ptp(ee[withdrawn - round(1.0 / DT) : withdrawn + 1], axis=0).max() < 1e-3
     assert stretch[withdrawn] > 0.74
     assert evaluation.metrics["withdrawals"] >= 1.0
     # While the hand was withdrawn the arm went back towards where it started.
@@ -136,8 +145,8 @@ def test_the_end_effector_tracks_the_hand():
     holding = round(event_times(rollout, "person holds the hand out")[0] / DT)
     assert np.all(np.diff(distance[holding:]) < 0)
     # Before the person reacts the robot stays where it started.
-    assert np.ptp(ee[:reach + 1], axis=0).max() == 0.0
-    assert set(rollout.states["robot"][:reach + 1]) == {"hold"}
+    assert np.ptp(ee[: reach + 1], axis=0).max() == 0.0
+    assert set(rollout.states["robot"][: reach + 1]) == {"hold"}
 
 
 def test_the_person_withdraws_after_waiting_patience_seconds_then_tries_again():
@@ -146,13 +155,14 @@ def test_the_person_withdraws_after_waiting_patience_seconds_then_tries_again():
     held = event_times(rollout, "person holds the hand out")
     withdrawn = event_times(rollout, "person withdraws the hand")
     reached_out = event_times(rollout, "person reaches out (attempt 1)") + event_times(
-        rollout, "person reaches out (attempt 2)")
+        rollout, "person reaches out (attempt 2)"
+    )
     assert len(withdrawn) >= 1 and len(reached_out) == 2
     assert withdrawn[0] - held[0] == pytest.approx(patience, abs=1e-9)
     assert reached_out[1] > withdrawn[0]  # withdrew (back to rest and a 1 s pause), then tried again
     states = rollout.states["human"]
     first_hold = round(held[0] / DT)
-    assert states[first_hold + 1:first_hold + round(patience / DT) + 1] == ["holding"] * round(patience / DT)
+    assert states[first_hold + 1 : first_hold + round(patience / DT) + 1] == ["holding"] * round(patience / DT)
     assert evaluation.metrics["withdrawals"] == len(withdrawn)
     assert evaluation.metrics["hand_wait_time"] == pytest.approx(states.count("holding") * DT)
     # The hand went back to where it rests between the two reaches.
@@ -212,8 +222,9 @@ def test_the_scene_trace_shows_the_hand_and_the_end_effector_where_the_trajector
     assert {"person", "stand", "side_table", "hand"} <= set(replay.bodies)
     for tick in (0, replay.ticks // 2, replay.ticks - 1):
         positions, _ = replay.poses(tick)
-        np.testing.assert_allclose(positions[replay.bodies.index("hand")], rollout.trajectories["human/hand"][tick],
-                                   atol=1e-12)
+        np.testing.assert_allclose(
+            positions[replay.bodies.index("hand")], rollout.trajectories["human/hand"][tick], atol=1e-12
+        )
     # The tool's last link ends 0.05 m short of the ee site, along the tool's axis.
     positions, quats = replay.poses(replay.ticks - 1)
     link7 = positions[replay.bodies.index("arm/link7")]
@@ -224,8 +235,14 @@ def test_the_scene_trace_shows_the_hand_and_the_end_effector_where_the_trajector
 
 
 def test_a_small_random_search_evaluates_every_scenario(tmp_path):
-    qd.start(spec_file=SPEC, out=tmp_path / "run", algorithm="random", budget=60, seed=0,
-             backend=qd.Backend(workers=2, timeout=60))
+    qd.start(
+        spec_file=SPEC,
+        out=tmp_path / "run",
+        algorithm="random",
+        budget=60,
+        seed=0,
+        backend=qd.Backend(workers=2, timeout=60),
+    )
     records = RunDirectory.open(tmp_path / "run").evaluations()
     assert sorted(r["index"] for r in records) == list(range(60))
     assert all(r["status"] == "ok" for r in records), [r["message"] for r in records if r["status"] != "ok"]

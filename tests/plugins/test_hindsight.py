@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hritest_plugins import hindsight as h
+from hritest_plugins import teleop_human as th
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
-
-from hritest_plugins import hindsight as h
-from hritest_plugins import teleop_human as th
 
 C = h.DEFAULT_CONSTANTS
 Z = 0.96  # goal height
@@ -102,9 +101,9 @@ def test_rotation_is_world_frame_and_composes():
 
 @settings(max_examples=60, deadline=None)
 @given(
-    st.tuples(
-        st.floats(-0.4, 0.4), st.floats(-0.4, 0.4), st.floats(-0.1, 0.1)
-    ).filter(lambda p: np.linalg.norm(p) > 0.025 and abs(np.linalg.norm(p) - 0.07) > 1e-3)
+    st.tuples(st.floats(-0.4, 0.4), st.floats(-0.4, 0.4), st.floats(-0.1, 0.1)).filter(
+        lambda p: np.linalg.norm(p) > 0.025 and abs(np.linalg.norm(p) - 0.07) > 1e-3
+    )
 )
 def test_translation_action_is_minus_gradient_of_value_over_40(offset):
     target = pose_at([0.6, 0.0, Z])
@@ -112,8 +111,8 @@ def test_translation_action_is_minus_gradient_of_value_over_40(offset):
     eps = 1e-6
     grad = np.array(
         [
-            (h.target_value(pose_at(pose[:3, 3] + e), target)
-             - h.target_value(pose_at(pose[:3, 3] - e), target)) / (2 * eps)
+            (h.target_value(pose_at(pose[:3, 3] + e), target) - h.target_value(pose_at(pose[:3, 3] - e), target))
+            / (2 * eps)
             for e in np.eye(3) * eps
         ]
     )
@@ -128,8 +127,7 @@ def test_translation_speed_is_capped_and_slows_down_near_the_target():
     far = h.target_action(pose_at([0.0, 0.5, Z]), target)
     assert np.linalg.norm(far[:3]) == pytest.approx(0.06125)
     assert C.max_translation_speed == pytest.approx(0.06125)
-    speeds = [np.linalg.norm(h.target_action(pose_at([0.6 - d, 0, Z]), target)[:3])
-              for d in (0.005, 0.01, 0.019)]
+    speeds = [np.linalg.norm(h.target_action(pose_at([0.6 - d, 0, Z]), target)[:3]) for d in (0.005, 0.01, 0.019)]
     assert speeds[0] < speeds[1] < speeds[2] < 0.06125
     np.testing.assert_array_equal(h.target_action(target, target), np.zeros(6))
 
@@ -247,7 +245,7 @@ def test_blending_follows_the_user_until_confident():
 def test_timid_blending_mixes_xy_by_confidence():
     conf = 0.6  # top-two gap: alpha = 1.5 * (0.6 - 0.4) = 0.3
     twist = h.blend_twist([0.1, 0.75, 0.15], ACTIONS, USER, mode="timid")
-    assert 0.75 - 0.15 == pytest.approx(conf)
+    assert pytest.approx(conf) == 0.75 - 0.15
     assisted = ACTIONS[1] + USER
     np.testing.assert_allclose(twist[:2], 0.3 * assisted[:2] + 0.7 * USER[:2])
     capped = h.blend_twist([0.0, 0.99, 0.01], ACTIONS, USER, mode="timid")

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from hritest_plugins import mdp_human as m
 
 GRID = m.GridSpec()
@@ -108,8 +107,14 @@ def test_lower_tau_gives_a_higher_entropy_policy():
 # --- the walk -----------------------------------------------------------------------------
 
 GOALS_TO_REACH = [
-    (WS1[0][0], WS1[1][0]), (WS1[0][1], WS1[1][1]), (0.6, 0.05), (WS1[0][0], WS1[1][1]),
-    (WS2[0][0], WS2[1][0]), (WS2[0][1], WS2[1][1]), (0.218, 0.626), (WS2[0][1], WS2[1][0]),
+    (WS1[0][0], WS1[1][0]),
+    (WS1[0][1], WS1[1][1]),
+    (0.6, 0.05),
+    (WS1[0][0], WS1[1][1]),
+    (WS2[0][0], WS2[1][0]),
+    (WS2[0][1], WS2[1][1]),
+    (0.218, 0.626),
+    (WS2[0][1], WS2[1][0]),
 ]
 
 

@@ -24,7 +24,7 @@ GOAL_Z = 0.96
 LOW, HIGH = (0.66, -0.06), (0.54, 0.16)
 
 
-def beliefs(rollout) -> np.ndarray:  # noqa: ANN001
+def beliefs(rollout) -> np.ndarray:
     """The robot's belief per tick, one column per goal, from the rollout's ``belief/<goal>`` series."""
     return np.column_stack([v for k, v in rollout.series.items() if k.startswith("belief/")])
 
@@ -137,7 +137,7 @@ def test_blending_reaches_the_goal_and_follows_the_user_until_confident():
 
 # --- misbehaving robot plugins ------------------------------------------------------------
 
-PLUGIN = '''
+PLUGIN = """
 from typing import ClassVar
 
 import numpy as np
@@ -161,14 +161,18 @@ class Robot:
         if {fault!r} == "nan" and self.ticks == 5:
             twist[0] = np.nan
         return RobotAction(twist=twist + observation["user_twist"])
-'''
+"""
 
 
-@pytest.mark.parametrize(("fault", "words"), [
-    ("raise", "robot plugin Robot raised RuntimeError: robot exploded"),
-    ("init", "robot plugin Robot raised RuntimeError: robot could not start"),
-    ("nan", "robot plugin Robot returned a non-finite value"),
-], ids=["raises-in-act", "raises-in-init", "nan-twist"])
+@pytest.mark.parametrize(
+    ("fault", "words"),
+    [
+        ("raise", "robot plugin Robot raised RuntimeError: robot exploded"),
+        ("init", "robot plugin Robot raised RuntimeError: robot could not start"),
+        ("nan", "robot plugin Robot returned a non-finite value"),
+    ],
+    ids=["raises-in-act", "raises-in-init", "nan-twist"],
+)
 def test_a_robot_plugin_that_raises_or_returns_nan_gives_plugin_error(tmp_path, fault, words):
     (tmp_path / "robot.py").write_text(PLUGIN.format(fault=fault))
     text = (SPECS / "teleop.yaml").read_text()

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
-
 from hritest_plugins import hindsight as h
 from hritest_plugins import teleop_human as th
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 START = np.array([0.41, 0.05])
 GOAL = np.array([0.6, 0.1])

@@ -28,8 +28,9 @@ def toy_run(folder: Path, *, failure: str = "objective >= 8", budget: int = 150,
     shutil.copy(FIXTURES / "toy_plugins.py", folder / "toy_plugins.py")
     spec = folder / "toy.yaml"
     spec.write_text((FIXTURES / "toy.yaml").read_text().replace("failure: objective >= 8", f"failure: {failure}"))
-    qd.start(spec_file=spec, out=folder / "run", algorithm="random", budget=budget, seed=seed,
-             backend=qd.Backend(workers=1))
+    qd.start(
+        spec_file=spec, out=folder / "run", algorithm="random", budget=budget, seed=seed, backend=qd.Backend(workers=1)
+    )
     return folder / "run"
 
 
@@ -61,7 +62,7 @@ def test_report_files_exist_with_embedded_figures(run, reported):
     images = re.findall(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"', page)
     assert len(images) == 2  # the archive heatmap and the QD-score curves
     assert all(base64.b64decode(data).startswith(b"\x89PNG\r\n\x1a\n") for data in images)
-    assert "src=\"http" not in page and "<script" not in page  # self-contained, opens from disk
+    assert 'src="http' not in page and "<script" not in page  # self-contained, opens from disk
     assert "![result archive of run](archive.png)" in (run / "report" / "summary.md").read_text()
 
 
@@ -146,8 +147,9 @@ def test_bad_input_exits_2(run, tmp_path):
     assert result.exit_code == 2
     assert "is not a folder" in result.output
 
-    empty = RunDirectory.create(root=tmp_path, spec_file=run / "spec.yaml", name="empty", meta={"spec_base": "."},
-                                folder=tmp_path / "empty")
+    empty = RunDirectory.create(
+        root=tmp_path, spec_file=run / "spec.yaml", name="empty", meta={"spec_base": "."}, folder=tmp_path / "empty"
+    )
     result = runner.invoke(app, ["report", str(empty.path)])
     assert result.exit_code == 2
     assert "has no evaluations yet" in result.output
@@ -164,13 +166,32 @@ def test_bad_input_exits_2(run, tmp_path):
 def test_surrogate_accuracy_is_tabled_when_the_run_has_one(calm_run, tmp_path):
     run = tmp_path / "run"
     shutil.copytree(calm_run, run)
-    per_outer = [{"outer_iteration": 1, "held_out": 99, "objective_mae": 3.25, "right_cell_fraction": 0.0101,
-                  "mean_cell_distance": 7.5},
-                 {"outer_iteration": 2, "held_out": 97, "objective_mae": 0.987654321, "right_cell_fraction": 0.25,
-                  "mean_cell_distance": 2.0}]
-    (run / "surrogate.json").write_text(json.dumps(
-        {"held_out": 196, "measure_mae": {"goal_distance": 0.123456789}, "per_outer_iteration": per_outer,
-         "fits": [{"outer_iteration": 1, "samples": 100, "occupancy_loss": 3.4, "predictor_loss": 0.01}]}))
+    per_outer = [
+        {
+            "outer_iteration": 1,
+            "held_out": 99,
+            "objective_mae": 3.25,
+            "right_cell_fraction": 0.0101,
+            "mean_cell_distance": 7.5,
+        },
+        {
+            "outer_iteration": 2,
+            "held_out": 97,
+            "objective_mae": 0.987654321,
+            "right_cell_fraction": 0.25,
+            "mean_cell_distance": 2.0,
+        },
+    ]
+    (run / "surrogate.json").write_text(
+        json.dumps(
+            {
+                "held_out": 196,
+                "measure_mae": {"goal_distance": 0.123456789},
+                "per_outer_iteration": per_outer,
+                "fits": [{"outer_iteration": 1, "samples": 100, "occupancy_loss": 3.4, "predictor_loss": 0.01}],
+            }
+        )
+    )
     page = write_report(run, recordings=0).read_text()
     assert "Surrogate accuracy on the proposals it made" in page
     for text in ("measure_mae.goal_distance", "0.123457", "196", "The same, per outer iteration", "0.987654"):

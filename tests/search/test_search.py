@@ -29,11 +29,18 @@ def elites(run: Path) -> list[dict]:
 
 @pytest.mark.parametrize("algorithm", ["random", "map_elites", "cma_mae"])
 def test_each_algorithm_fills_both_archives_and_the_run_directory(toy_spec, tmp_path, algorithm):
-    found = qd.start(spec_file=toy_spec(), out=tmp_path / "run", algorithm=algorithm, budget=250, seed=3,
-                     backend=TWO)
+    found = qd.start(spec_file=toy_spec(), out=tmp_path / "run", algorithm=algorithm, budget=250, seed=3, backend=TWO)
     run = tmp_path / "run"
-    for name in ("spec.yaml", "run.json", "evaluations.jsonl", "occupancy.f32", "checkpoint.pkl",
-                 "progress.csv", "archive.csv", "failures.yaml"):
+    for name in (
+        "spec.yaml",
+        "run.json",
+        "evaluations.jsonl",
+        "occupancy.f32",
+        "checkpoint.pkl",
+        "progress.csv",
+        "archive.csv",
+        "failures.yaml",
+    ):
         assert (run / name).is_file(), name
     records = RunDirectory.open(run).evaluations()
     assert sorted(r["index"] for r in records) == list(range(250))  # exactly the budget, none twice
@@ -44,8 +51,9 @@ def test_each_algorithm_fills_both_archives_and_the_run_directory(toy_spec, tmp_
         assert r["search_objective"] == pytest.approx(r["objective"] - r["repair_cost"])
     failures = yaml.safe_load((run / "failures.yaml").read_text())["failures"]
     assert all(f["objective"] >= 8 for f in failures)
-    assert len(failures) == sum(r["failure"] for r in records if r["index"] in
-                                {int(i) for i in found.state["result"].data("evaluation")})
+    assert len(failures) == sum(
+        r["failure"] for r in records if r["index"] in {int(i) for i in found.state["result"].data("evaluation")}
+    )
 
 
 def test_same_spec_and_seed_give_the_same_result_archive(toy_spec, tmp_path):
@@ -58,12 +66,19 @@ def test_same_spec_and_seed_give_the_same_result_archive(toy_spec, tmp_path):
     assert a.state["result"].stats.qd_score == b.state["result"].stats.qd_score
 
 
-@pytest.mark.parametrize(("fault", "status"), [("raise", "plugin_error"), ("nan", "nan"), ("exit", "crashed"),
-                                               ("hang", "timeout")])
+@pytest.mark.parametrize(
+    ("fault", "status"), [("raise", "plugin_error"), ("nan", "nan"), ("exit", "crashed"), ("hang", "timeout")]
+)
 def test_a_misbehaving_plugin_fails_its_scenarios_only(toy_spec, tmp_path, fault, status):
     spec = toy_spec("time_limit: 10.0\n", f"time_limit: 10.0\n  params: {{fault: {fault}, fault_above: 0.045}}\n")
-    found = qd.start(spec_file=spec, out=tmp_path / "run", algorithm="random", budget=60, seed=1,
-                     backend=qd.Backend(workers=2, timeout=1.0))
+    found = qd.start(
+        spec_file=spec,
+        out=tmp_path / "run",
+        algorithm="random",
+        budget=60,
+        seed=1,
+        backend=qd.Backend(workers=2, timeout=1.0),
+    )
     records = RunDirectory.open(tmp_path / "run").evaluations()
     assert sorted(r["index"] for r in records) == list(range(60))
     bad = [r for r in records if r["theta"][4] > 0.045]
@@ -80,10 +95,23 @@ def test_a_misbehaving_plugin_fails_its_scenarios_only(toy_spec, tmp_path, fault
 
 def start_in_background(spec: Path, out: Path, *, until_lines: int) -> subprocess.Popen:
     """A 700-evaluation search in its own process, returned once ``until_lines`` evaluations are in."""
-    command = [sys.executable, "-m", "hritest.cli", "search", str(spec), "--budget", "700", "--seed", "5",
-               "--workers", "2", "--quiet", "--out", str(out)]
-    process = subprocess.Popen(command, start_new_session=True, stdout=subprocess.DEVNULL,
-                               stderr=subprocess.DEVNULL)
+    command = [
+        sys.executable,
+        "-m",
+        "hritest.cli",
+        "search",
+        str(spec),
+        "--budget",
+        "700",
+        "--seed",
+        "5",
+        "--workers",
+        "2",
+        "--quiet",
+        "--out",
+        str(out),
+    ]
+    process = subprocess.Popen(command, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     lines = out / "evaluations.jsonl"
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline:
@@ -173,8 +201,7 @@ def test_bad_arguments_exit_2_and_write_nothing(toy_spec, tmp_path):
         result = runner.invoke(app, ["search", str(spec), "--out", str(tmp_path / "run"), *args])
         assert result.exit_code == 2, (args, result.output)
         assert not (tmp_path / "run").exists()
-    result = runner.invoke(app, ["search", str(spec), "--cluster", "tcp://127.0.0.1:1", "--out",
-                                 str(tmp_path / "run")])
+    result = runner.invoke(app, ["search", str(spec), "--cluster", "tcp://127.0.0.1:1", "--out", str(tmp_path / "run")])
     assert result.exit_code == 2 and ("Dask" in result.output or "cannot reach" in result.output)
     assert not (tmp_path / "run").exists()
 
@@ -188,8 +215,9 @@ def test_run_json_records_what_is_needed_to_reproduce(toy_spec, tmp_path):
 
 
 def test_the_command_line_search_ends_with_a_report_and_exit_1_for_failures(toy_spec, tmp_path):
-    result = runner.invoke(app, ["search", str(toy_spec()), "--budget", "120", "--workers", "2", "--quiet",
-                                 "--out", str(tmp_path / "run")])
+    result = runner.invoke(
+        app, ["search", str(toy_spec()), "--budget", "120", "--workers", "2", "--quiet", "--out", str(tmp_path / "run")]
+    )
     assert result.exit_code == 1 and isinstance(result.exception, SystemExit), result.output
     assert "failures" in result.output and (tmp_path / "run" / "report" / "index.html").is_file()
     assert f"report: {tmp_path / 'run' / 'report' / 'index.html'}" in result.output
@@ -198,10 +226,19 @@ def test_the_command_line_search_ends_with_a_report_and_exit_1_for_failures(toy_
 @pytest.mark.parametrize("algorithm", ["sas", "dsas"])
 def test_sas_and_dsas_search_a_task_without_grids_and_resume(toy_spec, tmp_path, algorithm):
     """The toy task declares no occupancy grids: the surrogate learns from theta alone."""
-    spec = toy_spec("budget: 500", "budget: 500\n  surrogate: {initial_evaluations: 30, inner_iterations: 20, "
-                                   "epochs: 5, batch_size: 16}")
-    found = qd.start(spec_file=spec, out=tmp_path / "run", algorithm=algorithm, budget=60, seed=0, backend=TWO,
-                     surrogate=qd.SurrogateOptions(device="cpu"))
+    spec = toy_spec(
+        "budget: 500",
+        "budget: 500\n  surrogate: {initial_evaluations: 30, inner_iterations: 20, epochs: 5, batch_size: 16}",
+    )
+    found = qd.start(
+        spec_file=spec,
+        out=tmp_path / "run",
+        algorithm=algorithm,
+        budget=60,
+        seed=0,
+        backend=TWO,
+        surrogate=qd.SurrogateOptions(device="cpu"),
+    )
     assert found.domain.grids == {}
     proposer = found.state["proposer"]
     assert proposer.surrogate.occupancy is None and proposer.outer >= 2

@@ -37,9 +37,7 @@ def test_no_motion_further_into_a_limit_within_the_margin():
     lower, upper = np.full(6, -1.0), np.full(6, 1.0)
     q = np.array([0.98, -0.98, 0.5, 0.0, 0.0, 0.0])  # joint 0 near upper, joint 1 near lower
     twist = np.full(6, 0.1)
-    qdot, _ = twist_to_joint_velocity(
-        J, twist, q, lower=lower, upper=upper, velocity_limits=SPEEDS
-    )
+    qdot, _ = twist_to_joint_velocity(J, twist, q, lower=lower, upper=upper, velocity_limits=SPEEDS)
     assert qdot[0] == 0.0  # would go further up: blocked
     assert qdot[1] == pytest.approx(0.1)  # moves away from its lower limit: allowed
     np.testing.assert_allclose(qdot[2:], 0.1)
@@ -48,7 +46,12 @@ def test_no_motion_further_into_a_limit_within_the_margin():
 def test_one_tick_never_crosses_a_limit_even_without_a_margin():
     q, upper = np.zeros(6), np.full(6, 0.01)
     qdot, _ = twist_to_joint_velocity(
-        np.eye(6), np.full(6, 0.5), q, lower=-upper, upper=upper, velocity_limits=SPEEDS,
+        np.eye(6),
+        np.full(6, 0.5),
+        q,
+        lower=-upper,
+        upper=upper,
+        velocity_limits=SPEEDS,
         margin=0.0,
     )
     assert np.all(q + qdot * 0.025 <= upper + 1e-15)
@@ -80,7 +83,11 @@ def test_limit_reached_is_the_translation_ratio_test(twist, expected):
     lower, upper = np.full(6, -np.inf), np.full(6, np.inf)
     upper[0] = 0.0
     _, limit_reached = twist_to_joint_velocity(
-        np.eye(6), np.array(twist, dtype=float), np.zeros(6), lower=lower, upper=upper,
+        np.eye(6),
+        np.array(twist, dtype=float),
+        np.zeros(6),
+        lower=lower,
+        upper=upper,
         velocity_limits=SPEEDS,
     )
     assert limit_reached is expected

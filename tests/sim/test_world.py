@@ -207,9 +207,7 @@ def test_folded_configurations_collide(world: World, q):
 def test_goal_boxes_and_hand_never_collide_with_the_arm():
     at_ee = tuple(START_EE)
     world = World(
-        layout=reference_layout(
-            objects=(Box(name="goal", center=at_ee, half_size=(0.032,) * 3),), hand_start=at_ee
-        )
+        layout=reference_layout(objects=(Box(name="goal", center=at_ee, half_size=(0.032,) * 3),), hand_start=at_ee)
     )
     assert not world.self_collision()
 
@@ -440,8 +438,15 @@ def test_a_scene_model_joins_the_world_with_its_own_joints(scene):
     np.testing.assert_allclose(world.ee_pose()[:3, 3], START_EE, atol=1e-3)
     replay = replay_now(world)
     kinds = {(geom.body, geom.kind) for geom in replay.geoms}
-    assert {("world", "box"), ("chair", "box"), ("chair", "mesh"), ("human", "capsule"), ("hand", "sphere"),
-            ("object/goal0", "box"), ("arm/link1", "capsule")} <= kinds
+    assert {
+        ("world", "box"),
+        ("chair", "box"),
+        ("chair", "mesh"),
+        ("human", "capsule"),
+        ("hand", "sphere"),
+        ("object/goal0", "box"),
+        ("arm/link1", "capsule"),
+    } <= kinds
     chair = [geom for geom in replay.geoms if geom.body == "chair"]
     assert len(chair) == 2  # the group-3 collision box and the transparent sphere are not drawn
     mesh = next(geom for geom in chair if geom.kind == "mesh")
@@ -479,8 +484,10 @@ def test_a_shared_world_switches_poses_mount_and_hand_without_recompiling(scene)
         bodies={"chair": BodyPose(y=0.5, yaw=0.3), "human": BodyPose(z=0.2)},
         arm=ArmMount(base=(0.3, 0.3, 0.7), yaw=-0.5, start=(-2.0, -0.4, -0.3, -0.7, 0.1, 3.5)),
         hand_start=(0.8, 0.1, 0.9),
-        objects=(Box(name="goal0", center=(0.5, 0.1, 0.96), half_size=(0.032,) * 3),
-                 Box(name="goal1", center=(0.2, 0.6, 0.96), half_size=(0.032,) * 3)),
+        objects=(
+            Box(name="goal0", center=(0.5, 0.1, 0.96), half_size=(0.032,) * 3),
+            Box(name="goal1", center=(0.2, 0.6, 0.96), half_size=(0.032,) * 3),
+        ),
     )
     world = shared_world(first)
     world.step_twist([0.05, 0.0, 0.0, 0.0, 0.0, 0.0])
@@ -497,15 +504,23 @@ def test_a_shared_world_switches_poses_mount_and_hand_without_recompiling(scene)
 def test_a_world_without_an_arm_says_so(scene):
     world = World(layout=WorldLayout(model=scene, arm=None, hand_start=(0.5, 0.0, 1.0)))
     np.testing.assert_array_equal(world.hand_position(), [0.5, 0.0, 1.0])
-    for use in (world.ee_pose, world.jacobian, lambda: world.step_twist(np.zeros(6)), lambda: world.set_q([0.0]),
-                lambda: world.q):
+    for use in (
+        world.ee_pose,
+        world.jacobian,
+        lambda: world.step_twist(np.zeros(6)),
+        lambda: world.set_q([0.0]),
+        lambda: world.q,
+    ):
         with pytest.raises(HritestError, match="no arm: set world.arm in the spec"):
             use()
 
 
 def test_an_unknown_body_is_explained_with_the_files_bodies(scene):
-    with pytest.raises(WorldModelError, match=r"room\.xml has no body named 'sofa'; its named bodies: chair, cart, "
-                                              r"human\. Fix the parameter that binds sofa\.x"):
+    with pytest.raises(
+        WorldModelError,
+        match=r"room\.xml has no body named 'sofa'; its named bodies: chair, cart, "
+        r"human\. Fix the parameter that binds sofa\.x",
+    ):
         World(layout=WorldLayout(model=scene, bodies={"sofa": BodyPose(x=1.0)}))
     with pytest.raises(WorldModelError, match="the world has no model file"):
         World(layout=WorldLayout(bodies={"sofa": BodyPose(x=1.0)}))

@@ -11,10 +11,11 @@ from hritest.domain import compile_spec
 from hritest.errors import SpecError
 from hritest.spec import load_spec
 
-
 # Placed objects for the toy spec, which has none: a workspace region and one box.
-PLACED = ("workspace:\n  regions:\n    - {name: ws1, x: [0.5, 0.7], y: [-0.1, 0.2]}\n"
-          "objects:\n  - {name: goal0, half_size: [0.032, 0.032, 0.032], position: [0.6, 0.05, 0.96]}\n")
+PLACED = (
+    "workspace:\n  regions:\n    - {name: ws1, x: [0.5, 0.7], y: [-0.1, 0.2]}\n"
+    "objects:\n  - {name: goal0, half_size: [0.032, 0.032, 0.032], position: [0.6, 0.05, 0.96]}\n"
+)
 
 
 def error_of(path: Path, *, compile: bool = True) -> SpecError:
@@ -48,27 +49,57 @@ def test_the_toy_spec_loads_and_compiles(toy_spec):
     ("old", "new", "field", "marker", "words"),
     [
         # An unknown key, pointed at and with the allowed keys listed.
-        ("  time_limit: 10.0\n", "  time_limit: 10.0\n  timelimit: 3\n", "task.timelimit", "timelimit:",
-         ["unknown key 'timelimit'", "time_limit"]),
+        (
+            "  time_limit: 10.0\n",
+            "  time_limit: 10.0\n  timelimit: 3\n",
+            "task.timelimit",
+            "timelimit:",
+            ["unknown key 'timelimit'", "time_limit"],
+        ),
         # A wrong type.
-        ("  time_limit: 10.0\n", "  time_limit: ten\n", "task.time_limit", "time_limit: ten",
-         ["valid number", "'ten'"]),
+        (
+            "  time_limit: 10.0\n",
+            "  time_limit: ten\n",
+            "task.time_limit",
+            "time_limit: ten",
+            ["valid number", "'ten'"],
+        ),
         # A measure range with lo >= hi.
-        ("range: [0, 0.32], cells: 16", "range: [0.32, 0.1], cells: 16", "measures[0].range", "0.32, 0.1",
-         ["lower end must be below the upper end"]),
+        (
+            "range: [0, 0.32], cells: 16",
+            "range: [0.32, 0.1], cells: 16",
+            "measures[0].range",
+            "0.32, 0.1",
+            ["lower end must be below the upper end"],
+        ),
         # A parameter bound to an unknown object.
         ("bind: task.g1x", "bind: goal9.x", "parameters[2].bind", "goal9.x", ["unknown target 'goal9'"]),
         # A constraint naming an unknown region: needs an inside constraint.
-        ("constraints:\n", PLACED + "constraints:\n  - {type: inside, objects: [goal0], regions: [ws7]}\n",
-         "constraints[0].regions[0]", "ws7", ["unknown region 'ws7'", "ws1"]),
+        (
+            "constraints:\n",
+            PLACED + "constraints:\n  - {type: inside, objects: [goal0], regions: [ws7]}\n",
+            "constraints[0].regions[0]",
+            "ws7",
+            ["unknown region 'ws7'", "ws1"],
+        ),
         # A duplicate name.
-        ("{name: variation,", "{name: goal_distance,", "measures[1].name", "{name: goal_distance, expr: norm",
-         ["duplicate name 'goal_distance'"]),
+        (
+            "{name: variation,",
+            "{name: goal_distance,",
+            "measures[1].name",
+            "{name: goal_distance, expr: norm",
+            ["duplicate name 'goal_distance'"],
+        ),
         # A measure with lo >= hi written as equal ends.
         ("range: [0, 0.087]", "range: [0.087, 0.087]", "measures[1].range", "0.087, 0.087", ["lower end"]),
         # A box that is not a box.
-        ("constraints:\n", PLACED.replace("half_size: [0.032, 0.032", "half_size: [0.032, -0.032") + "constraints:\n",
-         "objects[0].half_size", "-0.032", ["every half size must be positive"]),
+        (
+            "constraints:\n",
+            PLACED.replace("half_size: [0.032, 0.032", "half_size: [0.032, -0.032") + "constraints:\n",
+            "objects[0].half_size",
+            "-0.032",
+            ["every half size must be positive"],
+        ),
         # Unknown constraint type.
         ("- {type: bounds,", "- {type: fence,", "constraints[0]", "type: fence", ["inside", "no_overlap"]),
     ],
@@ -98,8 +129,9 @@ def test_structural_and_reference_errors_point_at_the_field(toy_spec, old, new, 
     ],
 )
 def test_objective_expressions_are_whitelisted(toy_spec, expression, words):
-    path = toy_spec("expr: completion_time", f"expr: {expression!r}" if "'" not in expression
-                    else f'expr: "{expression}"')
+    path = toy_spec(
+        "expr: completion_time", f"expr: {expression!r}" if "'" not in expression else f'expr: "{expression}"'
+    )
     issue = only_issue(error_of(path))
     assert issue.field == "objective.expr"
     assert issue.location.line == line_of(path, "expr: " + ('"' if "'" in expression else "'"))
@@ -186,11 +218,18 @@ def test_missing_required_key_points_at_parent(toy_spec):
 
 def test_every_issue_is_reported_at_once(toy_spec):
     path = toy_spec("constraints:\n", PLACED + "constraints:\n")
-    path.write_text(path.read_text().replace("bind: task.g1x", "bind: goal9.x").replace(
-        "cells: 16}\n  - {name: variation", "cells: 0}\n  - {name: variation"))
+    path.write_text(
+        path.read_text()
+        .replace("bind: task.g1x", "bind: goal9.x")
+        .replace("cells: 16}\n  - {name: variation", "cells: 0}\n  - {name: variation")
+    )
     error = error_of(path)
     assert {issue.field for issue in error.issues} == {"measures[0].cells"}  # structure is checked first
-    path.write_text(path.read_text().replace("cells: 0}", "cells: 16}").replace("regions:\n", "regions:\n    - {name: ws1, x: [0, 1], y: [0, 1]}\n"))
+    path.write_text(
+        path.read_text()
+        .replace("cells: 0}", "cells: 16}")
+        .replace("regions:\n", "regions:\n    - {name: ws1, x: [0, 1], y: [0, 1]}\n")
+    )
     error = error_of(path)
     assert {issue.field for issue in error.issues} == {"workspace.regions[1].name", "parameters[2].bind"}
 

@@ -24,13 +24,22 @@ CPU = torch.device("cpu")
 
 
 def surrogate_for(domain, *, epochs=5, seed=0) -> Surrogate:
-    return Surrogate(bounds=(domain.space.lower, domain.space.upper), channels=len(domain.grids),
-                     outputs=1 + len(domain.measures), epochs=epochs, batch_size=16, learning_rate=1e-3, device=CPU,
-                     seed=seed)
+    return Surrogate(
+        bounds=(domain.space.lower, domain.space.upper),
+        channels=len(domain.grids),
+        outputs=1 + len(domain.measures),
+        epochs=epochs,
+        batch_size=16,
+        learning_rate=1e-3,
+        device=CPU,
+        seed=seed,
+    )
 
 
-@pytest.mark.parametrize(("spec", "inputs", "channels", "outputs"),
-                         [("teleop", 9, 1, 3), ("collab", 6, 2, 3), ("collab_human", 8, 2, 3), ("collab_wait", 6, 2, 3)])
+@pytest.mark.parametrize(
+    ("spec", "inputs", "channels", "outputs"),
+    [("teleop", 9, 1, 3), ("collab", 6, 2, 3), ("collab_human", 8, 2, 3), ("collab_wait", 6, 2, 3)],
+)
 def test_shapes_follow_the_spec(spec, inputs, channels, outputs):
     domain = compile_spec(load_spec(SPECS / f"{spec}.yaml"))
     assert (domain.space.dim, len(domain.grids), 1 + len(domain.measures)) == (inputs, channels, outputs)
@@ -78,8 +87,9 @@ def theta_only_data(n: int = 96) -> tuple[tuple[np.ndarray, np.ndarray], np.ndar
 
 
 def theta_only_surrogate(bounds, *, epochs: int) -> Surrogate:
-    return Surrogate(bounds=bounds, channels=0, outputs=3, epochs=epochs, batch_size=16, learning_rate=1e-3,
-                     device=CPU, seed=0)
+    return Surrogate(
+        bounds=bounds, channels=0, outputs=3, epochs=epochs, batch_size=16, learning_rate=1e-3, device=CPU, seed=0
+    )
 
 
 def test_without_grids_the_predictor_alone_learns_the_targets_from_theta():
@@ -145,8 +155,10 @@ def test_the_inner_loop_fills_an_archive_and_downsampling_takes_one_per_block(te
     assert archive.stats.num_elites > 0
     chosen = downsample(domain, archive, rng=np.random.default_rng(0))
     assert 0 < len(chosen) <= min(archive.stats.num_elites, 5 * 20)
-    cells = {tuple(np.minimum(np.floor((m - np.array([0, 0])) / np.array([0.32 / 5, 0.112 / 20])), [4, 19]))
-             for m in objective_measures(domain, model, chosen)}
+    cells = {
+        tuple(np.minimum(np.floor((m - np.array([0, 0])) / np.array([0.32 / 5, 0.112 / 20])), [4, 19]))
+        for m in objective_measures(domain, model, chosen)
+    }
     assert len(cells) == len(chosen)  # no two from the same block
 
 
@@ -156,13 +168,25 @@ def objective_measures(domain, model, solutions):
 
 def tiny_run(tmp_path: Path, out: str, algorithm: str, *, workers: int = 2) -> qd.Search:
     """A 60-evaluation run of the teleoperation spec with a tiny surrogate protocol."""
-    text = (SPECS / "teleop.yaml").read_text().replace(
-        "surrogate: {initial_evaluations: 100, inner_iterations: 10000, downsample_cells: [5, 20]}",
-        "surrogate: {initial_evaluations: 30, inner_iterations: 20, downsample_cells: [3, 5], epochs: 5}")
+    text = (
+        (SPECS / "teleop.yaml")
+        .read_text()
+        .replace(
+            "surrogate: {initial_evaluations: 100, inner_iterations: 10000, downsample_cells: [5, 20]}",
+            "surrogate: {initial_evaluations: 30, inner_iterations: 20, downsample_cells: [3, 5], epochs: 5}",
+        )
+    )
     spec = tmp_path / "teleop.yaml"
     spec.write_text(text)
-    return qd.start(spec_file=spec, out=tmp_path / out, algorithm=algorithm, budget=60, seed=0,
-                    backend=qd.Backend(workers=workers, timeout=60), surrogate=qd.SurrogateOptions(device="cpu"))
+    return qd.start(
+        spec_file=spec,
+        out=tmp_path / out,
+        algorithm=algorithm,
+        budget=60,
+        seed=0,
+        backend=qd.Backend(workers=workers, timeout=60),
+        surrogate=qd.SurrogateOptions(device="cpu"),
+    )
 
 
 @pytest.mark.parametrize("algorithm", ["sas", "dsas"])
@@ -191,8 +215,8 @@ def test_outside_the_bounds_the_prediction_is_that_of_the_clipped_theta(teleop_d
     model = surrogate_for(domain, epochs=2)
     model.fit(theta, grids, targets)
     outside = theta[:3].astype(np.float64).copy()
-    outside[:, 0] += 1.0                       # g0x a metre past its upper bound
-    outside[:, 5] -= 0.2                       # a waypoint offset past its lower bound
+    outside[:, 0] += 1.0  # g0x a metre past its upper bound
+    outside[:, 5] -= 0.2  # a waypoint offset past its lower bound
     clipped = np.clip(outside, domain.space.lower, domain.space.upper)
     np.testing.assert_allclose(model.predict(outside), model.predict(clipped), rtol=1e-6)
     assert not np.allclose(model.predict(outside), model.predict(theta[:3]))

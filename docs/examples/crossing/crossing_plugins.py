@@ -76,11 +76,31 @@ class CrossingTask:
             if tick == self.ticks:
                 break
             robot_xy, human_xy = np.array([robot_x, 0.0]), np.array([human_x, human_y])
-            wanted = float(robot.act({"time": now, "dt": dt, "robot_position": robot_xy, "robot_speed": speed,
-                                      "human_position": human_xy, "human_velocity": np.array(human_velocity)}))
-            human_velocity = _velocity(human.act({"time": now, "dt": dt, "human_position": human_xy,
-                                                  "robot_position": robot_xy, "robot_speed": speed,
-                                                  "corridor_half_width": p.corridor_half_width}), human)
+            wanted = float(
+                robot.act(
+                    {
+                        "time": now,
+                        "dt": dt,
+                        "robot_position": robot_xy,
+                        "robot_speed": speed,
+                        "human_position": human_xy,
+                        "human_velocity": np.array(human_velocity),
+                    }
+                )
+            )
+            human_velocity = _velocity(
+                human.act(
+                    {
+                        "time": now,
+                        "dt": dt,
+                        "human_position": human_xy,
+                        "robot_position": robot_xy,
+                        "robot_speed": speed,
+                        "corridor_half_width": p.corridor_half_width,
+                    }
+                ),
+                human,
+            )
             moving = speed >= STILL
             speed = max(0.0, speed + min(max(wanted - speed, -p.deceleration * dt), p.acceleration * dt))
             if moving and speed < STILL:
@@ -100,8 +120,10 @@ class CrossingTask:
                 "time_stopped": float(np.count_nonzero(speeds[1:] < STILL) * dt),
                 "closest_speed": float(speeds[closest]),
             },
-            trajectories={"robot": np.column_stack([robot_xs, floor, floor]),
-                          "human": np.column_stack([human_xs, human_ys, floor])},
+            trajectories={
+                "robot": np.column_stack([robot_xs, floor, floor]),
+                "human": np.column_stack([human_xs, human_ys, floor]),
+            },
             series={"distance": distances, "robot_speed": speeds},
             events=events,
         )
