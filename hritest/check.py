@@ -15,8 +15,9 @@ import numpy as np
 
 from hritest import contract
 from hritest.domain import Domain, compile_spec
-from hritest.evaluate import Evaluation, evaluate_with_rollout
+from hritest.evaluate import evaluate_with_rollout
 from hritest.protocols import Rollout
+from hritest.records import Evaluation
 from hritest.spec import load_spec
 
 
@@ -67,7 +68,9 @@ class _Checker:
             self.find(evaluation.status, label, _fix(evaluation))
         elif rollout is not None:
             for problem in contract.nonfinite_metrics(rollout):
-                self.find("metrics", label, f"{problem}; a search survives it, but an expression that reads it will fail")
+                self.find(
+                    "metrics", label, f"{problem}; a search survives it, but an expression that reads it will fail"
+                )
         return evaluation, rollout
 
     def find(self, check: str, label: str, message: str) -> None:
@@ -89,17 +92,25 @@ def check_spec(path: Path, *, scenarios: int = 3, seed: int = 0) -> CheckReport:
     checker = _Checker(domain=domain)
     checker.passed.append(
         f"spec compiles: theta has {domain.space.dim} components, task {domain.task_cls.__qualname__}, "
-        f"robot {domain.robot_cls.__qualname__}, human {domain.human_cls.__qualname__}")
+        f"robot {domain.robot_cls.__qualname__}, human {domain.human_cls.__qualname__}"
+    )
     nominal, rollout = checker.scenario("nominal scenario", domain.nominal, seed)
     if nominal.ok:
-        checker.passed.append(f"nominal scenario: objective {nominal.objective:.4g}, "
-                              f"failure {nominal.failure}, metrics {_short(nominal.metrics)}")
+        checker.passed.append(
+            f"nominal scenario: objective {nominal.objective:.4g}, "
+            f"failure {nominal.failure}, metrics {_short(nominal.metrics)}"
+        )
         again, _ = checker.scenario("nominal scenario, again", domain.nominal, seed)
         if _outcome(again) != _outcome(nominal):
-            checker.find("determinism", "nominal scenario", (
-                f"the same theta and seed gave {_outcome(nominal)} and then {_outcome(again)}; draw every random "
-                "number from the rng each plugin is given (never np.random or random directly) and keep no "
-                "state between episodes"))
+            checker.find(
+                "determinism",
+                "nominal scenario",
+                (
+                    f"the same theta and seed gave {_outcome(nominal)} and then {_outcome(again)}; draw every random "
+                    "number from the rng each plugin is given (never np.random or random directly) and keep no "
+                    "state between episodes"
+                ),
+            )
         elif again.ok:
             checker.passed.append("same seed, same outcome")
     rng = np.random.default_rng(seed)
@@ -110,12 +121,20 @@ def check_spec(path: Path, *, scenarios: int = 3, seed: int = 0) -> CheckReport:
         outcomes.append(evaluation)
     ok = [e for e in outcomes if e.ok]
     if ok:
-        checker.passed.append(f"{len(ok)} of {len(outcomes)} random scenarios ok; objectives "
-                              + ", ".join(f"{e.objective:.4g}" for e in ok))
+        checker.passed.append(
+            f"{len(ok)} of {len(outcomes)} random scenarios ok; objectives "
+            + ", ".join(f"{e.objective:.4g}" for e in ok)
+        )
     if rollout is not None:
         checker.notes += _recording_notes(rollout, domain)
-    return CheckReport(spec=str(path), findings=tuple(checker.findings), passed=tuple(checker.passed),
-                       notes=tuple(checker.notes), seconds=tuple(checker.seconds), budget=domain.spec.search.budget)
+    return CheckReport(
+        spec=str(path),
+        findings=tuple(checker.findings),
+        passed=tuple(checker.passed),
+        notes=tuple(checker.notes),
+        seconds=tuple(checker.seconds),
+        budget=domain.spec.search.budget,
+    )
 
 
 def _fix(evaluation: Evaluation) -> str:
@@ -130,8 +149,12 @@ def _fix(evaluation: Evaluation) -> str:
 
 
 def _outcome(evaluation: Evaluation) -> tuple:
-    return (evaluation.status, evaluation.objective, tuple(np.asarray(evaluation.measures).tolist()),
-            tuple(sorted(evaluation.metrics.items())))
+    return (
+        evaluation.status,
+        evaluation.objective,
+        tuple(np.asarray(evaluation.measures).tolist()),
+        tuple(sorted(evaluation.metrics.items())),
+    )
 
 
 def _short(metrics: dict[str, float]) -> str:
@@ -141,8 +164,10 @@ def _short(metrics: dict[str, float]) -> str:
 def _recording_notes(rollout: Rollout, domain: Domain) -> list[str]:
     notes = []
     if rollout.scene is None and not rollout.trajectories:
-        notes.append("the rollout has no scene and no trajectories: recordings will show only the scenario "
-                     "document (add Rollout(trajectories=...) or, with MuJoCo, Rollout(scene=world.tracer()...))")
+        notes.append(
+            "the rollout has no scene and no trajectories: recordings will show only the scenario "
+            "document (add Rollout(trajectories=...) or, with MuJoCo, Rollout(scene=world.tracer()...))"
+        )
     if not domain.grids:
         notes.append("the task declares no grids: SAS/DSAS's surrogate predicts from theta alone")
     return notes

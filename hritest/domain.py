@@ -25,7 +25,7 @@ from hritest.spec import Spec, expr, source_of
 from hritest.spec.references import ARM_TARGET, check_references
 
 if TYPE_CHECKING:
-    from hritest.evaluate import Evaluation
+    from hritest.records import Evaluation
 
 REGION_COLOUR = (0.55, 0.75, 0.95, 0.6)
 OBJECT_COLOUR = (0.9, 0.5, 0.1, 1.0)
@@ -100,8 +100,7 @@ def plugin_params(cls: type, values: Mapping[str, Any]) -> Any:
 
 def place(layout: WorldLayout, scenario: Scenario) -> WorldLayout:
     """``layout`` with the objects, the arm and the world model's bodies where ``scenario`` puts them."""
-    objects = tuple(replace(box, center=tuple(float(v) for v in scenario.objects[box.name]))
-                    for box in layout.objects)
+    objects = tuple(replace(box, center=tuple(float(v) for v in scenario.objects[box.name])) for box in layout.objects)
     bodies, arm = dict(layout.bodies), layout.arm
     for name, values in scenario.bodies.items():
         if name == ARM_TARGET:
@@ -110,8 +109,12 @@ def place(layout: WorldLayout, scenario: Scenario) -> WorldLayout:
                 if attribute in values:
                     base[axis] = float(values[attribute])
             start = values.get("start", arm.start)
-            arm = replace(arm, base=tuple(base), yaw=float(values.get("yaw", arm.yaw)),
-                          start=None if start is None else tuple(float(v) for v in np.ravel(start)))
+            arm = replace(
+                arm,
+                base=tuple(base),
+                yaw=float(values.get("yaw", arm.yaw)),
+                start=None if start is None else tuple(float(v) for v in np.ravel(start)),
+            )
         else:
             pose = bodies.get(name, BodyPose())
             bodies[name] = replace(pose, **{k: float(v) for k, v in values.items()})
@@ -134,16 +137,20 @@ def compile_spec(spec: Spec, *, base: Path | None = None) -> Domain:
     base = base if base is not None else (Path(source.file).parent if source.file != "<spec>" else None)
     classes: dict[str, type] = {}
     issues = []
-    for kind, path, ref in (("task", ("task", "name"), spec.task.name),
-                            ("robot", ("robot", "policy"), spec.robot.policy),
-                            ("human", ("human", "policy"), spec.human.policy)):
+    for kind, path, ref in (
+        ("task", ("task", "name"), spec.task.name),
+        ("robot", ("robot", "policy"), spec.robot.policy),
+        ("human", ("human", "policy"), spec.human.policy),
+    ):
         try:
             classes[kind] = plugins.resolve(ref, kind=kind, base=base)
         except PluginError as exc:
             issues.append(source.issue(path, str(exc)))
         else:
-            issues += [source.issue(path, f"{kind} plugin {ref!r}: {problem}")
-                       for problem in contract.class_problems(classes[kind], kind=kind)]
+            issues += [
+                source.issue(path, f"{kind} plugin {ref!r}: {problem}")
+                for problem in contract.class_problems(classes[kind], kind=kind)
+            ]
     if issues:
         raise SpecError(issues, file=source.file)
 
@@ -179,8 +186,7 @@ def compile_spec(spec: Spec, *, base: Path | None = None) -> Domain:
         human_cls=classes["human"],
         objective=expr.parse(spec.objective.expr),
         measures=tuple(
-            Measure(name=m.name, expression=expr.parse(m.expr), range=m.range, cells=m.cells)
-            for m in spec.measures
+            Measure(name=m.name, expression=expr.parse(m.expr), range=m.range, cells=m.cells) for m in spec.measures
         ),
         failure=expr.parse(spec.failure, condition=True),
         nominal=theta0,
@@ -211,10 +217,13 @@ def _plugin_params(cls: type, given: Mapping[str, Any], path: tuple, spec: Spec,
     if model is None:
         return dict(given)
     issues = [
-        source.issue(("parameters", i, "bind"),
-                     f"{cls.__name__} has no parameter {p.bind.split('.')[1]!r}; its parameters are "
-                     f"{', '.join(model.model_fields) or 'none'}")
-        for i, p in bound if p.bind.split(".")[1] not in model.model_fields
+        source.issue(
+            ("parameters", i, "bind"),
+            f"{cls.__name__} has no parameter {p.bind.split('.')[1]!r}; its parameters are "
+            f"{', '.join(model.model_fields) or 'none'}",
+        )
+        for i, p in bound
+        if p.bind.split(".")[1] not in model.model_fields
     ]
     try:
         params = model.model_validate(dict(given)).model_dump()
@@ -231,9 +240,15 @@ def _plugin_params(cls: type, given: Mapping[str, Any], path: tuple, spec: Spec,
                     model.model_validate({**params, attribute: value})
                 except pydantic.ValidationError as exc:
                     reason = "; ".join(e["msg"] for e in exc.errors(include_url=False))
-                    issues.append(source.issue(("parameters", i, "bounds"), (
-                        f"{cls.__name__}.Params rejects {attribute} = {end} ({reason}); narrow the bounds "
-                        "to values it accepts")))
+                    issues.append(
+                        source.issue(
+                            ("parameters", i, "bounds"),
+                            (
+                                f"{cls.__name__}.Params rejects {attribute} = {end} ({reason}); narrow the bounds "
+                                "to values it accepts"
+                            ),
+                        )
+                    )
                     break
     if issues:
         raise SpecError(issues, file=source.file)
@@ -256,18 +271,31 @@ def _world(spec: Spec, base: Path | None) -> WorldLayout | None:
             table = Box(name="table", center=t.center, half_size=t.half_size)
             top = t.center[2] + t.half_size[2]
         regions = tuple(
-            Box(name=r.name, center=((r.x[0] + r.x[1]) / 2, (r.y[0] + r.y[1]) / 2, top + 0.001),
-                half_size=((r.x[1] - r.x[0]) / 2, (r.y[1] - r.y[0]) / 2, 0.001), rgba=REGION_COLOUR)
+            Box(
+                name=r.name,
+                center=((r.x[0] + r.x[1]) / 2, (r.y[0] + r.y[1]) / 2, top + 0.001),
+                half_size=((r.x[1] - r.x[0]) / 2, (r.y[1] - r.y[0]) / 2, 0.001),
+                rgba=REGION_COLOUR,
+            )
             for r in spec.workspace.regions
         )
-    objects = tuple(Box(name=o.name, center=o.position, half_size=o.half_size, rgba=OBJECT_COLOUR)
-                    for o in spec.objects)
+    objects = tuple(
+        Box(name=o.name, center=o.position, half_size=o.half_size, rgba=OBJECT_COLOUR) for o in spec.objects
+    )
     if spec.world is None:  # a tabletop spec of the paper's kind: the built-in arm
         return WorldLayout(table=table, regions=regions, objects=objects, arm=ArmMount())
     arm = spec.world.arm
-    mount = None if arm is None else ArmMount(
-        mjcf=resolved(arm.model), ee_site=arm.ee_site, base=arm.base, yaw=arm.yaw,
-        start=None if arm.start is None else tuple(arm.start))
+    mount = (
+        None
+        if arm is None
+        else ArmMount(
+            mjcf=resolved(arm.model),
+            ee_site=arm.ee_site,
+            base=arm.base,
+            yaw=arm.yaw,
+            start=None if arm.start is None else tuple(arm.start),
+        )
+    )
     return WorldLayout(model=resolved(spec.world.model), table=table, regions=regions, objects=objects, arm=mount)
 
 
@@ -279,7 +307,7 @@ def _nominal_theta(spec: Spec, space: ScenarioSpace, world: WorldLayout | None) 
         value = p.nominal if p.nominal is not None else _spec_value(slot, space, world)
         if value is None or np.size(value) not in (1, slot.size):
             value = (slot.lower + slot.upper) / 2
-        theta[slot.start:slot.start + slot.size] = np.clip(value, slot.lower, slot.upper)
+        theta[slot.start : slot.start + slot.size] = np.clip(value, slot.lower, slot.upper)
     return theta
 
 
@@ -310,12 +338,16 @@ def _check_world(spec: Spec, world: WorldLayout, scenario: Scenario, source) -> 
     try:
         built = World(layout=placed)
     except HritestError as exc:
-        binding = [i for i, p in enumerate(spec.parameters)
-                   if getattr(exc, "body", None) is not None and p.bind.split(".")[0] == exc.body]
+        binding = [
+            i
+            for i, p in enumerate(spec.parameters)
+            if getattr(exc, "body", None) is not None and p.bind.split(".")[0] == exc.body
+        ]
         where = ("parameters", binding[0], "bind") if binding else ("world",) if spec.world else ("workspace",)
         raise source.error(where, str(exc)) from None
     joints = len(built.joint_names) if world.arm is not None else 0
     for i, p in enumerate(spec.parameters):
         if p.bind == f"{ARM_TARGET}.start" and p.size != joints:
-            raise source.error(("parameters", i, "size"),
-                               f"arm.start needs one angle per arm joint: set size: {joints}")
+            raise source.error(
+                ("parameters", i, "size"), f"arm.start needs one angle per arm joint: set size: {joints}"
+            )

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 import time
 import traceback
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -17,37 +17,8 @@ import numpy as np
 from hritest import contract
 from hritest.domain import Domain, plugin_params
 from hritest.protocols import Rollout
+from hritest.records import Clause, Evaluation, Status
 from hritest.scenario import Scenario
-
-OK = "ok"
-
-
-@dataclass(frozen=True, kw_only=True)
-class Evaluation:
-    """The outcome of one scenario.
-
-    ``objective`` is the raw objective (what the result archive and the report see);
-    ``search_objective`` subtracts the weighted repair cost (what the search archive sees).
-    """
-
-    theta: np.ndarray
-    theta_repaired: np.ndarray
-    repair_cost: float
-    regions: dict[str, str | None]
-    seed: int
-    status: str = OK
-    message: str = ""
-    objective: float = math.nan
-    search_objective: float = math.nan
-    measures: np.ndarray = field(default_factory=lambda: np.array([]))
-    metrics: dict[str, float] = field(default_factory=dict)
-    occupancy: np.ndarray | None = None
-    failure: bool = False
-    seconds: float = 0.0
-
-    @property
-    def ok(self) -> bool:
-        return self.status == OK
 
 
 def evaluate(domain: Domain, theta: np.ndarray, *, seed: int = 0) -> Evaluation:
@@ -63,17 +34,22 @@ def evaluate_with_rollout(domain: Domain, theta: np.ndarray, *, seed: int = 0) -
     start = time.perf_counter()
     theta = np.asarray(theta, dtype=float)
     repaired = domain.repair(theta)
-    base = dict(theta=theta.copy(), theta_repaired=repaired.theta, repair_cost=repaired.cost,
-                regions=repaired.regions, seed=seed)
+    base = dict(
+        theta=theta.copy(),
+        theta_repaired=repaired.theta,
+        repair_cost=repaired.cost,
+        regions=repaired.regions,
+        seed=seed,
+    )
     rollout = None
     if not repaired.ok:
-        evaluation = Evaluation(**base, status=repaired.status, message=repaired.message)
+        evaluation = Evaluation(**base, status=Status(repaired.status), message=repaired.message)
     else:
         scenario = domain.space.bind(repaired.theta)
         try:
             rollout = simulate(domain, scenario, seed=seed)
-        except Exception as exc:  # noqa: BLE001 - a plugin's crash fails this scenario only
-            evaluation = Evaluation(**base, status="plugin_error", message=_blame(domain, exc))
+        except Exception as exc:
+            evaluation = Evaluation(**base, status=Status.PLUGIN_ERROR, message=_blame(domain, exc))
         else:
             evaluation = _score(domain, scenario, rollout, base)
     return replace(evaluation, seconds=time.perf_counter() - start), rollout
@@ -91,25 +67,43 @@ def simulate(domain: Domain, scenario: Scenario, *, seed: int) -> Rollout:
 def _score(domain: Domain, scenario: Scenario, rollout: Rollout, base: dict) -> Evaluation:
     broken = contract.rollout_problems(domain.task_cls, rollout)
     if broken:
-        return Evaluation(**base, status="plugin_error",
-                          message="the task plugin broke the contract: " + "; ".join(broken))
+        return Evaluation(
+            **base, status=Status.PLUGIN_ERROR, message="the task plugin broke the contract: " + "; ".join(broken)
+        )
     missing = contract.missing_metrics(domain.task_cls, rollout)
     if missing:
-        return Evaluation(**base, status="metric_error", message="; ".join(missing))
+        return Evaluation(**base, status=Status.METRIC_ERROR, message="; ".join(missing))
     env: dict[str, Any] = {**rollout.metrics, **scenario.values}
     try:
         objective = float(domain.objective.evaluate(env))
         measures = np.array([float(m.expression.evaluate(env)) for m in domain.measures])
-    except (KeyError, ZeroDivisionError, ValueError, TypeError) as exc:
-        return Evaluation(**base, status="metric_error",
-                          message=f"{type(exc).__name__}: {exc} (metrics: {sorted(rollout.metrics)})")
+    except (KeyError, ZeroDivisionError, ValueError, TypeError, IndexError) as exc:
+        return Evaluation(
+            **base,
+            status=Status.METRIC_ERROR,
+            message=f"{type(exc).__name__}: {exc} (metrics: {sorted(rollout.metrics)})",
+        )
     occupancy = np.stack([rollout.grids[name] for name in domain.grids]) if domain.grids else None
     if not (math.isfinite(objective) and np.all(np.isfinite(measures))):
-        return Evaluation(**base, status="nan", objective=objective, measures=measures,
-                          metrics=dict(rollout.metrics),
-                          message=f"objective {objective} or measures {measures.tolist()} not finite")
-    names = {"objective": objective, **{m.name: v for m, v in zip(domain.measures, measures)}}
-    failure = bool(domain.failure.evaluate({**env, **names}))
+        return Evaluation(
+            **base,
+            status=Status.NAN,
+            objective=objective,
+            measures=measures,
+            metrics=dict(rollout.metrics),
+            message=f"objective {objective} or measures {measures.tolist()} not finite",
+        )
+    env.update({"objective": objective, **{m.name: v for m, v in zip(domain.measures, measures)}})
+    try:
+        clauses = tuple(
+            Clause(text=c.text, holds=bool(c.evaluate(env)), values={n: _scalar(env[n]) for n in sorted(c.names)})
+            for c in domain.failure.clauses()
+        )
+        failure = bool(domain.failure.evaluate(env))
+    except (KeyError, ZeroDivisionError, ValueError, TypeError, IndexError) as exc:
+        return Evaluation(
+            **base, status=Status.METRIC_ERROR, message=f"the failure condition: {type(exc).__name__}: {exc}"
+        )
     return Evaluation(
         **base,
         objective=objective,
@@ -118,13 +112,22 @@ def _score(domain: Domain, scenario: Scenario, rollout: Rollout, base: dict) -> 
         metrics={k: float(v) for k, v in rollout.metrics.items()},
         occupancy=occupancy,
         failure=failure,
+        clauses=clauses,
     )
+
+
+def _scalar(value: object) -> float | list[float]:
+    """A clause's value as JSON can hold it: a number, or a parameter group as a list."""
+    array = np.asarray(value, dtype=float)
+    return float(array) if array.ndim == 0 else array.tolist()
 
 
 def _blame(domain: Domain, exc: BaseException) -> str:
     """A message naming the plugin whose method was running deepest, with the traceback."""
-    plugins = {(cls.__module__, cls.__qualname__): (kind, cls) for kind, cls in
-               (("task", domain.task_cls), ("robot", domain.robot_cls), ("human", domain.human_cls))}
+    plugins = {
+        (cls.__module__, cls.__qualname__): (kind, cls)
+        for kind, cls in (("task", domain.task_cls), ("robot", domain.robot_cls), ("human", domain.human_cls))
+    }
     culprit = None
     for frame, _ in traceback.walk_tb(exc.__traceback__):
         owner = frame.f_code.co_qualname.rsplit(".", 1)[0]

@@ -43,21 +43,40 @@ _domains_key = pytest.StashKey[dict]()
 
 def pytest_addoption(parser: pytest.Parser) -> None:
     group = parser.getgroup("hritest", "hritest failure corpus")
-    group.addoption("--hri-corpus", metavar="DIR", default=None,
-                    help="the failure corpus to replay (default: [tool.hritest] corpus in pyproject.toml, "
-                         "else tests/hri_failures; relative to the rootdir)")
-    group.addoption("--hri-spec", metavar="SPEC", action="append", default=[],
-                    help="replay only the entries of this spec (its name or its file); repeatable")
-    group.addoption("--hri-mark-fixed", action="store_true", default=False,
-                    help="set status: fixed in the corpus files of open failures that no longer fail")
-    group.addoption("--hri-search-budget", metavar="N", type=int, default=0,
-                    help="also run a Random search of N evaluations per spec in the corpus (the spec's seed); "
-                         "a failure it finds that the corpus does not hold fails the session")
+    group.addoption(
+        "--hri-corpus",
+        metavar="DIR",
+        default=None,
+        help="the failure corpus to replay (default: [tool.hritest] corpus in pyproject.toml, "
+        "else tests/hri_failures; relative to the rootdir)",
+    )
+    group.addoption(
+        "--hri-spec",
+        metavar="SPEC",
+        action="append",
+        default=[],
+        help="replay only the entries of this spec (its name or its file); repeatable",
+    )
+    group.addoption(
+        "--hri-mark-fixed",
+        action="store_true",
+        default=False,
+        help="set status: fixed in the corpus files of open failures that no longer fail",
+    )
+    group.addoption(
+        "--hri-search-budget",
+        metavar="N",
+        type=int,
+        default=0,
+        help="also run a Random search of N evaluations per spec in the corpus (the spec's seed); "
+        "a failure it finds that the corpus does not hold fails the session",
+    )
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    config.addinivalue_line("markers", "hri: a hritest scenario test (a failure corpus entry or a test using "
-                                       "the hri_scenario fixture)")
+    config.addinivalue_line(
+        "markers", "hri: a hritest scenario test (a failure corpus entry or a test using the hri_scenario fixture)"
+    )
     given = config.getoption("hri_corpus", None)
     try:
         corpus = (config.rootpath / given) if given else hc.default_corpus(config.rootpath)
@@ -155,27 +174,31 @@ class CorpusItem(pytest.Item):
         then_now = _then_now(replayed)
         if not evaluation.ok:
             self._set("error", f"the scenario no longer evaluates: status {evaluation.status}")
-            raise HriRegression(f"{self._title()} no longer evaluates: status {evaluation.status}\n"
-                                f"{evaluation.message}\n{then_now}")
+            raise HriRegression(
+                f"{self._title()} no longer evaluates: status {evaluation.status}\n{evaluation.message}\n{then_now}"
+            )
         condition = domain.spec.failure
         if evaluation.failure and entry.status == "fixed":
             self._set("regression", "")
             raise HriRegression(f"{self._title()} was marked fixed but fails again: '{condition}' holds\n{then_now}")
         if evaluation.failure:
             self._set("still failing", then_now)
-            pytest.xfail(f"hritest open failure still fails: '{condition}' holds "
-                         f"(objective {evaluation.objective:.6g}, recorded {entry.objective:.6g})")
+            pytest.xfail(
+                f"hritest open failure still fails: '{condition}' holds "
+                f"(objective {evaluation.objective:.6g}, recorded {entry.objective:.6g})"
+            )
         if entry.status == "fixed":
             self._set("passing", "")
             return
-        text = (f"open failure {entry.spec_name}/{entry.id} no longer fails: '{condition}' does not hold\n"
-                f"{then_now}\n")
+        text = f"open failure {entry.spec_name}/{entry.id} no longer fails: '{condition}' does not hold\n{then_now}\n"
         if self.config.getoption("hri_mark_fixed"):
             hc.set_status(entry.path, "fixed")
             text += f"marked fixed in {entry.path} (--hri-mark-fixed)"
         else:
-            text += (f"mark it fixed: hritest promote --to {_shown(entry.path.parent.parent, self.config)} "
-                     f"--mark-fixed {entry.spec_name}/{entry.id}   (or run pytest with --hri-mark-fixed)")
+            text += (
+                f"mark it fixed: hritest promote --to {_shown(entry.path.parent.parent, self.config)} "
+                f"--mark-fixed {entry.spec_name}/{entry.id}   (or run pytest with --hri-mark-fixed)"
+            )
         self._set("now passing", text)
 
     def _set(self, outcome: str, section: str) -> None:
@@ -189,9 +212,11 @@ class CorpusItem(pytest.Item):
         if isinstance(excinfo.value, HriRegression):
             entry = self.entry
             theta = ",".join(repr(v) for v in entry.theta.values())
-            return (f"{excinfo.value}\ncorpus file: {_shown(entry.path, self.config)}\n"
-                    f"replay it: hritest replay {_shown(entry.spec_path, self.config)} --seed {entry.seed} "
-                    f"--theta {theta}")
+            return (
+                f"{excinfo.value}\ncorpus file: {_shown(entry.path, self.config)}\n"
+                f"replay it: hritest replay {_shown(entry.spec_path, self.config)} --seed {entry.seed} "
+                f"--theta {theta}"
+            )
         if isinstance(excinfo.value, HritestError):
             return f"{self._title()}: {excinfo.value}"
         return super().repr_failure(excinfo)
@@ -261,8 +286,14 @@ class SearchItem(pytest.Item):
             pytest.skip(f"hritest: its spec {_shown(self.spec, self.config)} no longer exists")
         run = _search_folder(self.config) / self.spec_name
         shutil.rmtree(run, ignore_errors=True)
-        found = qd.start(spec_file=self.spec, out=run, algorithm="random", budget=self.budget, seed=None,
-                         backend=qd.Backend(workers=os.cpu_count() or 1))
+        found = qd.start(
+            spec_file=self.spec,
+            out=run,
+            algorithm="random",
+            budget=self.budget,
+            seed=None,
+            backend=qd.Backend(workers=os.cpu_count() or 1),
+        )
         spec_digest = found.run_dir.meta["spec_digest"]
         new = []
         for record in found.failures():
@@ -270,16 +301,23 @@ class SearchItem(pytest.Item):
             if digest not in self.held and digest[:12] not in self.held:
                 new.append((digest[:12], record))
         if new:
-            self.user_properties += [("hri_entry", f"{self.spec_name}/search"),
-                                     ("hri_outcome", "search with new failures")]
+            self.user_properties += [
+                ("hri_entry", f"{self.spec_name}/search"),
+                ("hri_outcome", "search with new failures"),
+            ]
             names = [m.name for m in found.domain.measures]
-            lines = [f"  {d}  objective {r['objective']:.6g}  "
-                     + "  ".join(f"{n} {v:.4g}" for n, v in zip(names, r["measures"])) for d, r in new]
+            lines = [
+                f"  {d}  objective {r['objective']:.6g}  "
+                + "  ".join(f"{n} {v:.4g}" for n, v in zip(names, r["measures"]))
+                for d, r in new
+            ]
             raise HriRegression(
                 f"a Random search of {self.budget} evaluations found {len(new)} failure(s) of {self.spec_name} "
-                f"that the corpus does not hold:\n" + "\n".join(lines) +
-                f"\nkeep them: hritest promote {_shown(run, self.config)} "
-                f"--to {_shown(self.path.parent, self.config)}")
+                f"that the corpus does not hold:\n"
+                + "\n".join(lines)
+                + f"\nkeep them: hritest promote {_shown(run, self.config)} "
+                f"--to {_shown(self.path.parent, self.config)}"
+            )
 
     def repr_failure(self, excinfo: pytest.ExceptionInfo[BaseException], style: Any = None) -> Any:
         if isinstance(excinfo.value, HriRegression | HritestError):
@@ -311,8 +349,10 @@ def _stale_reason(entry: hc.Entry, config: pytest.Config) -> str:
         return f"its spec {spec} no longer exists; restore it, or delete {path}"
     now = digest(entry.spec_path)
     if now != entry.spec_digest:
-        return (f"{spec} changed since {entry.spec_name}/{entry.id} was recorded (spec digest "
-                f"{entry.spec_digest[:12]} then, {now[:12]} now); search again and promote, or delete {path}")
+        return (
+            f"{spec} changed since {entry.spec_name}/{entry.id} was recorded (spec digest "
+            f"{entry.spec_digest[:12]} then, {now[:12]} now); search again and promote, or delete {path}"
+        )
     return ""
 
 
@@ -338,11 +378,19 @@ def _replay(domain: Any, entry: hc.Entry) -> Any:
 
     labels = list(domain.space.labels)
     if list(entry.theta) != labels:
-        raise HritestError(f"{entry.path}: field 'theta' has components {', '.join(entry.theta)}, but "
-                           f"{entry.spec_name}'s theta is {', '.join(labels)}")
-    record = {"index": entry.id, "theta": list(entry.theta.values()), "seed": entry.seed, "status": "ok",
-              "failure": True, "objective": entry.objective,
-              "measures": [entry.measures.get(m.name) for m in domain.measures]}
+        raise HritestError(
+            f"{entry.path}: field 'theta' has components {', '.join(entry.theta)}, but "
+            f"{entry.spec_name}'s theta is {', '.join(labels)}"
+        )
+    record = {
+        "index": entry.id,
+        "theta": list(entry.theta.values()),
+        "seed": entry.seed,
+        "status": "ok",
+        "failure": True,
+        "objective": entry.objective,
+        "measures": [entry.measures.get(m.name) for m in domain.measures],
+    }
     return replay_record(domain, record, spec_digest=entry.spec_digest)
 
 
@@ -432,7 +480,7 @@ def hri_scenario(request: pytest.FixtureRequest) -> Callable[..., tuple[Any, Any
 
     ``spec`` is a spec file (relative paths from the rootdir); ``theta`` the raw scenario parameters,
     a sequence in the order ``hritest show`` lists or a mapping from those labels to values. Returns
-    the :class:`hritest.evaluate.Evaluation` (``status``, ``objective``, ``measures``, ``metrics``,
+    the :class:`hritest.records.Evaluation` (``status``, ``objective``, ``measures``, ``metrics``,
     ``failure``) and the Rollout (None when the scenario did not simulate). Specs compile once per
     session::
 
@@ -453,13 +501,16 @@ def hri_scenario(request: pytest.FixtureRequest) -> Callable[..., tuple[Any, Any
             missing = [label for label in labels if label not in theta]
             extra = [key for key in theta if key not in labels]
             if missing or extra:
-                raise ValueError(f"hri_scenario: theta for {spec} needs exactly {', '.join(labels)}; "
-                                 f"missing {missing or 'none'}, unknown {extra or 'none'}")
+                raise ValueError(
+                    f"hri_scenario: theta for {spec} needs exactly {', '.join(labels)}; "
+                    f"missing {missing or 'none'}, unknown {extra or 'none'}"
+                )
             theta = [theta[label] for label in labels]
         values = np.asarray(theta, dtype=float)
         if values.shape != (len(labels),):
-            raise ValueError(f"hri_scenario: {spec} needs {len(labels)} theta values ({', '.join(labels)}), "
-                             f"got {values.size}")
+            raise ValueError(
+                f"hri_scenario: {spec} needs {len(labels)} theta values ({', '.join(labels)}), got {values.size}"
+            )
         return evaluate_with_rollout(domain, values, seed=seed)
 
     return simulate

@@ -94,15 +94,16 @@ class _Scene:
     quaternions: np.ndarray  # (ticks, bodies, 4) wxyz, world frame
 
 
-def write_recording(path: Path, *, domain: Any, evaluation: Any, rollout: Any, recording_id: str,
-                    title: str = "") -> Path:
+def write_recording(
+    path: Path, *, domain: Any, evaluation: Any, rollout: Any, recording_id: str, title: str = ""
+) -> Path:
     """Writes the ``.rrd`` of one simulated scenario (atomically: a temporary file, then a rename).
 
     Args:
         path: where to write it; its folder is created.
         domain: the :class:`hritest.domain.Domain` the scenario belongs to (for the document:
             ``spec.name``, ``spec.failure``, ``measures``, ``space.labels``).
-        evaluation: the scenario's :class:`hritest.evaluate.Evaluation`.
+        evaluation: the scenario's :class:`hritest.records.Evaluation`.
         rollout: its :class:`hritest.protocols.Rollout` (``None`` if it never simulated).
         recording_id: the recording's id (the scenario digest), so that several files of one
             scenario open as one recording.
@@ -122,8 +123,9 @@ def write_recording(path: Path, *, domain: Any, evaluation: Any, rollout: Any, r
         _log_scenario(rec, domain, evaluation, title)
         if rollout is not None:
             if scene_problem:
-                rec.log("events", rr.TextLog(f"scene not drawn: {scene_problem}", level=rr.TextLogLevel.WARN),
-                        static=True)
+                rec.log(
+                    "events", rr.TextLog(f"scene not drawn: {scene_problem}", level=rr.TextLogLevel.WARN), static=True
+                )
             if scene is not None or rollout.trajectories:
                 rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
             if scene is not None:
@@ -177,8 +179,10 @@ def _blueprint(rollout: Any, scene: _Scene | None):  # noqa: ANN202 - rerun.blue
     if rollout is not None and rollout.series:
         side.append(rrb.TimeSeriesView(origin="series", name="series"))
     side.append(rrb.TextLogView(origin="/", contents=["+ /states/**", "+ /events"], name="states and events"))
-    grids = [rrb.Spatial2DView(origin=_path("grids", name), name=name)
-             for name in (sorted(rollout.grids) if rollout is not None else [])]
+    grids = [
+        rrb.Spatial2DView(origin=_path("grids", name), name=name)
+        for name in (sorted(rollout.grids) if rollout is not None else [])
+    ]
     side.append(rrb.Tabs(*grids, rrb.TextDocumentView(origin="scenario", name="scenario")))
     if rollout is None or (scene is None and not rollout.trajectories):
         return rrb.Blueprint(rrb.Vertical(*side), collapse_panels=True)
@@ -206,8 +210,11 @@ def _eye(scene: _Scene | None, rollout: Any):  # noqa: ANN202 - rerun.blueprint.
 def _geom_centres(scene: _Scene) -> np.ndarray:
     """Every geom's centre in the world on every tick, planes left out (they have no extent)."""
     index = {body: i for i, body in enumerate(scene.bodies)}
-    centres = [scene.positions[:, index[g.body]] + _rotate(scene.quaternions[:, index[g.body]], g.pos)
-               for g in scene.geoms if g.kind != "plane"]
+    centres = [
+        scene.positions[:, index[g.body]] + _rotate(scene.quaternions[:, index[g.body]], g.pos)
+        for g in scene.geoms
+        if g.kind != "plane"
+    ]
     return np.concatenate([np.zeros((0, 3)), *centres])
 
 
@@ -215,17 +222,26 @@ def _log_scenario(rec: Any, domain: Any, evaluation: Any, title: str) -> None:
     import rerun as rr
 
     names = [m.name for m in domain.measures]
-    lines = [f"# {title or domain.spec.name}", "",
-             f"status **{evaluation.status}**, failure **{evaluation.failure}** ({domain.spec.failure}), "
-             f"seed {evaluation.seed}", "",
-             "| quantity | value |", "|---|---|",
-             f"| objective | {evaluation.objective:.6g} |",
-             *(f"| {n} | {v:.6g} |" for n, v in zip(names, np.asarray(evaluation.measures, dtype=float))),
-             f"| repair cost | {evaluation.repair_cost:.6g} |",
-             *(f"| {k} | {v:.6g} |" for k, v in evaluation.metrics.items()),
-             "", "| theta | raw | repaired |", "|---|---|---|",
-             *(f"| {label} | {a:.6g} | {b:.6g} |" for label, a, b in
-               zip(domain.space.labels, evaluation.theta, evaluation.theta_repaired))]
+    lines = [
+        f"# {title or domain.spec.name}",
+        "",
+        f"status **{evaluation.status}**, failure **{evaluation.failure}** ({domain.spec.failure}), "
+        f"seed {evaluation.seed}",
+        "",
+        "| quantity | value |",
+        "|---|---|",
+        f"| objective | {evaluation.objective:.6g} |",
+        *(f"| {n} | {v:.6g} |" for n, v in zip(names, np.asarray(evaluation.measures, dtype=float))),
+        f"| repair cost | {evaluation.repair_cost:.6g} |",
+        *(f"| {k} | {v:.6g} |" for k, v in evaluation.metrics.items()),
+        "",
+        "| theta | raw | repaired |",
+        "|---|---|---|",
+        *(
+            f"| {label} | {a:.6g} | {b:.6g} |"
+            for label, a, b in zip(domain.space.labels, evaluation.theta, evaluation.theta_repaired)
+        ),
+    ]
     if evaluation.message:
         lines += ["", "```", evaluation.message, "```"]
     rec.log("scenario", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN), static=True)
@@ -247,11 +263,21 @@ def _log_scene(rec: Any, scene: _Scene) -> None:
         positions, quaternions = scene.positions[:, i], scene.quaternions[:, i]
         xyzw = quaternions[:, [1, 2, 3, 0]]
         if _moves(positions) or _moves(quaternions):
-            rec.send_columns(entity, indexes=[time], columns=rr.Transform3D.columns(
-                translation=positions, quaternion=xyzw, parent_frame=[WORLD_FRAME] * len(positions)))
+            rec.send_columns(
+                entity,
+                indexes=[time],
+                columns=rr.Transform3D.columns(
+                    translation=positions, quaternion=xyzw, parent_frame=[WORLD_FRAME] * len(positions)
+                ),
+            )
         else:
-            rec.log(entity, rr.Transform3D(translation=positions[0], quaternion=rr.Quaternion(xyzw=xyzw[0]),
-                                           parent_frame=WORLD_FRAME), static=True)
+            rec.log(
+                entity,
+                rr.Transform3D(
+                    translation=positions[0], quaternion=rr.Quaternion(xyzw=xyzw[0]), parent_frame=WORLD_FRAME
+                ),
+                static=True,
+            )
 
 
 def _moves(values: np.ndarray) -> bool:
@@ -270,27 +296,50 @@ def _shapes(geoms: Sequence[Any]) -> list[Any]:
     shapes = []
     boxes = [_box(g) for g in by_kind["box"]] + [_plane(g) for g in by_kind["plane"]]
     if boxes:
-        shapes.append(rr.Boxes3D(centers=[b[0] for b in boxes], half_sizes=[b[1] for b in boxes],
-                                 quaternions=[b[2] for b in boxes], colors=[b[3] for b in boxes], fill_mode=solid))
+        shapes.append(
+            rr.Boxes3D(
+                centers=[b[0] for b in boxes],
+                half_sizes=[b[1] for b in boxes],
+                quaternions=[b[2] for b in boxes],
+                colors=[b[3] for b in boxes],
+                fill_mode=solid,
+            )
+        )
     round_ = by_kind["sphere"] + by_kind["ellipsoid"]
     if round_:
-        shapes.append(rr.Ellipsoids3D(
-            centers=[g.pos for g in round_], quaternions=[_xyzw(g.quat) for g in round_],
-            half_sizes=[(g.size[0],) * 3 if g.kind == "sphere" else g.size for g in round_],
-            colors=[_rgba(g.rgba) for g in round_], fill_mode=solid))
+        shapes.append(
+            rr.Ellipsoids3D(
+                centers=[g.pos for g in round_],
+                quaternions=[_xyzw(g.quat) for g in round_],
+                half_sizes=[(g.size[0],) * 3 if g.kind == "sphere" else g.size for g in round_],
+                colors=[_rgba(g.rgba) for g in round_],
+                fill_mode=solid,
+            )
+        )
     if by_kind["capsule"]:
         capsules = by_kind["capsule"]  # rerun's capsule starts at its translation, MuJoCo's is centred
-        shapes.append(rr.Capsules3D(
-            lengths=[2 * g.size[1] for g in capsules], radii=[g.size[0] for g in capsules],
-            translations=[np.asarray(g.pos) - _rotate(g.quat, (0.0, 0.0, g.size[1])) for g in capsules],
-            quaternions=[_xyzw(g.quat) for g in capsules], colors=[_rgba(g.rgba) for g in capsules],
-            fill_mode=solid))
+        shapes.append(
+            rr.Capsules3D(
+                lengths=[2 * g.size[1] for g in capsules],
+                radii=[g.size[0] for g in capsules],
+                translations=[np.asarray(g.pos) - _rotate(g.quat, (0.0, 0.0, g.size[1])) for g in capsules],
+                quaternions=[_xyzw(g.quat) for g in capsules],
+                colors=[_rgba(g.rgba) for g in capsules],
+                fill_mode=solid,
+            )
+        )
     if by_kind["cylinder"]:
         cylinders = by_kind["cylinder"]
-        shapes.append(rr.Cylinders3D(
-            lengths=[2 * g.size[1] for g in cylinders], radii=[g.size[0] for g in cylinders],
-            centers=[g.pos for g in cylinders], quaternions=[_xyzw(g.quat) for g in cylinders],
-            colors=[_rgba(g.rgba) for g in cylinders], fill_mode=solid))
+        shapes.append(
+            rr.Cylinders3D(
+                lengths=[2 * g.size[1] for g in cylinders],
+                radii=[g.size[0] for g in cylinders],
+                centers=[g.pos for g in cylinders],
+                quaternions=[_xyzw(g.quat) for g in cylinders],
+                colors=[_rgba(g.rgba) for g in cylinders],
+                fill_mode=solid,
+            )
+        )
     meshes = [g for g in by_kind["mesh"] if g.vertices is not None and g.faces is not None]
     if meshes:
         shapes.append(_mesh(meshes))
@@ -321,8 +370,11 @@ def _mesh(meshes: Sequence[Any]) -> Any:
         faces.append(np.asarray(geom.faces, dtype=np.uint32).reshape(-1, 3) + offset)
         colours.append(np.tile(_rgba(geom.rgba), (len(v), 1)))
         offset += len(v)
-    return rr.Mesh3D(vertex_positions=np.concatenate(vertices), triangle_indices=np.concatenate(faces),
-                     vertex_colors=np.concatenate(colours))
+    return rr.Mesh3D(
+        vertex_positions=np.concatenate(vertices),
+        triangle_indices=np.concatenate(faces),
+        vertex_colors=np.concatenate(colours),
+    )
 
 
 def _log_trajectories(rec: Any, rollout: Any) -> None:
@@ -334,12 +386,18 @@ def _log_trajectories(rec: Any, rollout: Any) -> None:
         if not len(points):
             continue
         entity, colour = _path("world", name), _COLOURS[i % len(_COLOURS)]
-        rec.log(entity, rr.CoordinateFrame(WORLD_FRAME),
-                rr.Points3D.from_fields(radii=rr.components.Radius.ui_points([_POINT_PIXELS]), colors=[colour]),
-                static=True)
-        rec.log(f"{entity}/path", rr.CoordinateFrame(WORLD_FRAME),
-                rr.LineStrips3D([points], radii=rr.components.Radius.ui_points([_PATH_PIXELS]), colors=[colour]),
-                static=True)
+        rec.log(
+            entity,
+            rr.CoordinateFrame(WORLD_FRAME),
+            rr.Points3D.from_fields(radii=rr.components.Radius.ui_points([_POINT_PIXELS]), colors=[colour]),
+            static=True,
+        )
+        rec.log(
+            f"{entity}/path",
+            rr.CoordinateFrame(WORLD_FRAME),
+            rr.LineStrips3D([points], radii=rr.components.Radius.ui_points([_PATH_PIXELS]), colors=[colour]),
+            static=True,
+        )
         time = rr.TimeColumn(TIMELINE, duration=np.asarray(rollout.time, dtype=float)[: len(points)])
         rec.send_columns(entity, indexes=[time], columns=rr.Points3D.columns(positions=points))
 
@@ -384,8 +442,13 @@ def _log_verdict(rec: Any, domain: Any, evaluation: Any, rollout: Any) -> None:
     end = float(rollout.time[-1]) if len(rollout.time) else 0.0
     verdict = f"FAILURE ({domain.spec.failure})" if evaluation.failure else "no failure"
     rec.set_time(TIMELINE, duration=end)
-    rec.log("events", rr.TextLog(f"episode ends: objective {evaluation.objective:.6g}, {verdict}",
-                                 level=rr.TextLogLevel.ERROR if evaluation.failure else rr.TextLogLevel.INFO))
+    rec.log(
+        "events",
+        rr.TextLog(
+            f"episode ends: objective {evaluation.objective:.6g}, {verdict}",
+            level=rr.TextLogLevel.ERROR if evaluation.failure else rr.TextLogLevel.INFO,
+        ),
+    )
 
 
 def grid_image(grid: np.ndarray) -> np.ndarray:
@@ -459,8 +522,11 @@ def open_viewer(path: Path) -> None:
 
     viewer = shutil.which("rerun") or str(Path(sys.executable).with_name("rerun"))
     try:
-        subprocess.Popen([viewer, str(path)], start_new_session=True, stdout=subprocess.DEVNULL,
-                         stderr=subprocess.DEVNULL)
+        subprocess.Popen(
+            [viewer, str(path)], start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+        )
     except OSError as exc:
-        raise RecordingError(f"cannot start the Rerun viewer ({viewer}): {exc.strerror or exc}; "
-                             f"open the recording yourself with: rerun {path}") from None
+        raise RecordingError(
+            f"cannot start the Rerun viewer ({viewer}): {exc.strerror or exc}; "
+            f"open the recording yourself with: rerun {path}"
+        ) from None

@@ -25,8 +25,9 @@ import yaml
 
 from hritest.domain import Domain, compile_spec
 from hritest.errors import HritestError
-from hritest.evaluate import Evaluation, evaluate_with_rollout
+from hritest.evaluate import evaluate_with_rollout
 from hritest.protocols import Rollout
+from hritest.records import Evaluation
 from hritest.rundir import RunDirectory
 from hritest.spec import load_spec
 
@@ -85,16 +86,29 @@ def outcome_of(evaluation: Evaluation) -> dict[str, Any]:
     }
 
 
-def compare(stored: Mapping[str, Any], replayed: Mapping[str, Any], measure_names: Sequence[str], *,
-            tolerance: float = TOLERANCE) -> tuple[Check, ...]:
+def compare(
+    stored: Mapping[str, Any],
+    replayed: Mapping[str, Any],
+    measure_names: Sequence[str],
+    *,
+    tolerance: float = TOLERANCE,
+) -> tuple[Check, ...]:
     """Compares two outcomes (as :func:`outcome_of` gives them): status and failure exactly,
     objective and measures within ``tolerance`` (absolute; ``None`` stands for not finite)."""
     checks = [
         Check("status", stored.get("status"), replayed["status"], stored.get("status") == replayed["status"]),
-        Check("failure", stored.get("failure"), replayed["failure"],
-              bool(stored.get("failure")) == bool(replayed["failure"])),
-        Check("objective", stored.get("objective"), replayed["objective"],
-              _close(stored.get("objective"), replayed["objective"], tolerance)),
+        Check(
+            "failure",
+            stored.get("failure"),
+            replayed["failure"],
+            bool(stored.get("failure")) == bool(replayed["failure"]),
+        ),
+        Check(
+            "objective",
+            stored.get("objective"),
+            replayed["objective"],
+            _close(stored.get("objective"), replayed["objective"], tolerance),
+        ),
     ]
     old = list(stored.get("measures") or [])
     new = list(replayed["measures"])
@@ -135,8 +149,9 @@ def failure_ids(run: RunDirectory, records: Sequence[Mapping[str, Any]]) -> list
     if path.is_file():
         data = yaml.safe_load(path.read_text()) or {}
         return [int(f["id"]) for f in data.get("failures") or []]
-    return [int(r["index"]) for r in sorted(records, key=lambda r: (-(r["objective"] or 0), r["index"]))
-            if r.get("failure")]
+    return [
+        int(r["index"]) for r in sorted(records, key=lambda r: (-(r["objective"] or 0), r["index"])) if r.get("failure")
+    ]
 
 
 def stored_failure(run: RunDirectory, failure_id: int) -> dict[str, Any]:
@@ -157,16 +172,23 @@ def stored_failure(run: RunDirectory, failure_id: int) -> dict[str, Any]:
     return next(r for r in records if r["index"] == failure_id)
 
 
-def replay_record(domain: Domain, record: Mapping[str, Any], *, spec_digest: str,
-                  tolerance: float = TOLERANCE) -> Replay:
+def replay_record(
+    domain: Domain, record: Mapping[str, Any], *, spec_digest: str, tolerance: float = TOLERANCE
+) -> Replay:
     """Re-simulates a stored evaluation record (its raw ``theta`` and ``seed``) and compares."""
-    evaluation, rollout = evaluate_with_rollout(domain, np.asarray(record["theta"], dtype=float),
-                                                seed=int(record["seed"]))
+    evaluation, rollout = evaluate_with_rollout(
+        domain, np.asarray(record["theta"], dtype=float), seed=int(record["seed"])
+    )
     checks = compare(record, outcome_of(evaluation), [m.name for m in domain.measures], tolerance=tolerance)
-    return Replay(domain=domain, evaluation=evaluation, rollout=rollout,
-                  digest=scenario_digest(spec_digest, evaluation.theta_repaired, evaluation.seed),
-                  checks=checks, against=f"evaluation {record['index']} as stored in evaluations.jsonl",
-                  tolerance=tolerance)
+    return Replay(
+        domain=domain,
+        evaluation=evaluation,
+        rollout=rollout,
+        digest=scenario_digest(spec_digest, evaluation.theta_repaired, evaluation.seed),
+        checks=checks,
+        against=f"evaluation {record['index']} as stored in evaluations.jsonl",
+        tolerance=tolerance,
+    )
 
 
 def replay_failure(run_path: Path, failure_id: int, *, tolerance: float = TOLERANCE) -> Replay:
@@ -180,14 +202,20 @@ def replay_failure(run_path: Path, failure_id: int, *, tolerance: float = TOLERA
     return replay_record(run_domain(run), record, spec_digest=run.meta["spec_digest"], tolerance=tolerance)
 
 
-def replay_theta(domain: Domain, theta: np.ndarray, *, seed: int, spec_digest: str,
-                 tolerance: float = TOLERANCE) -> Replay:
+def replay_theta(
+    domain: Domain, theta: np.ndarray, *, seed: int, spec_digest: str, tolerance: float = TOLERANCE
+) -> Replay:
     """Simulates a scenario given by hand twice; the second run is checked against the first."""
     first, _ = evaluate_with_rollout(domain, theta, seed=seed)
     evaluation, rollout = evaluate_with_rollout(domain, theta, seed=seed)
-    checks = compare(outcome_of(first), outcome_of(evaluation), [m.name for m in domain.measures],
-                     tolerance=tolerance)
-    return Replay(domain=domain, evaluation=evaluation, rollout=rollout,
-                  digest=scenario_digest(spec_digest, evaluation.theta_repaired, seed), checks=checks,
-                  against="a first simulation of the same theta and seed (determinism)", tolerance=tolerance,
-                  reference="first run")
+    checks = compare(outcome_of(first), outcome_of(evaluation), [m.name for m in domain.measures], tolerance=tolerance)
+    return Replay(
+        domain=domain,
+        evaluation=evaluation,
+        rollout=rollout,
+        digest=scenario_digest(spec_digest, evaluation.theta_repaired, seed),
+        checks=checks,
+        against="a first simulation of the same theta and seed (determinism)",
+        tolerance=tolerance,
+        reference="first run",
+    )

@@ -17,7 +17,6 @@ import pytest
 from rerun.chunk import RrdReader
 
 from hritest.domain import compile_spec
-from hritest.evaluate import Evaluation
 from hritest.protocols import Rollout
 from hritest.recording import (
     APPLICATION_ID,
@@ -29,6 +28,7 @@ from hritest.recording import (
     recording_ids,
     write_recording,
 )
+from hritest.records import Evaluation
 from hritest.spec import load_spec
 
 TOY = Path(__file__).parent / "fixtures" / "toy.yaml"
@@ -36,20 +36,35 @@ DT = 0.025
 
 
 @pytest.fixture(scope="module")
-def domain():  # noqa: ANN201
+def domain():
     return compile_spec(load_spec(TOY))
 
 
 @pytest.fixture(scope="module")
-def evaluation(domain):  # noqa: ANN001, ANN201
+def evaluation(domain):
     theta = np.linspace(0.0, 0.1, len(domain.space.labels))
-    return Evaluation(theta=theta, theta_repaired=theta, repair_cost=0.0, regions={}, seed=7, objective=9.0,
-                      measures=np.array([0.1, 0.02]), metrics={"completion_time": 9.0}, failure=True)
+    return Evaluation(
+        theta=theta,
+        theta_repaired=theta,
+        repair_cost=0.0,
+        regions={},
+        seed=7,
+        objective=9.0,
+        measures=np.array([0.1, 0.02]),
+        metrics={"completion_time": 9.0},
+        failure=True,
+    )
 
 
-def record(tmp_path: Path, domain, evaluation, rollout: Rollout) -> Path:  # noqa: ANN001
-    return write_recording(tmp_path / "sub" / "scenario.rrd", domain=domain, evaluation=evaluation,
-                           rollout=rollout, recording_id="digest", title="test")
+def record(tmp_path: Path, domain, evaluation, rollout: Rollout) -> Path:
+    return write_recording(
+        tmp_path / "sub" / "scenario.rrd",
+        domain=domain,
+        evaluation=evaluation,
+        rollout=rollout,
+        recording_id="digest",
+        title="test",
+    )
 
 
 def components(path: Path, entity: str) -> tuple[dict, list[dict]]:
@@ -59,8 +74,11 @@ def components(path: Path, entity: str) -> tuple[dict, list[dict]]:
         if str(chunk.entity_path) != f"/{entity}":
             continue
         batch = chunk.to_record_batch()
-        times = (batch.column(TIMELINE).cast("int64").to_pylist() if TIMELINE in chunk.timeline_names
-                 else [None] * batch.num_rows)
+        times = (
+            batch.column(TIMELINE).cast("int64").to_pylist()
+            if TIMELINE in chunk.timeline_names
+            else [None] * batch.num_rows
+        )
         for i, t in enumerate(times):
             row = static if t is None else timed.setdefault(t, {})
             row.update({name: batch.column(name)[i].as_py() for name in batch.schema.names if ":" in name})
@@ -75,8 +93,12 @@ def views(path: Path) -> list[tuple[str, str]]:
     for chunk in reader.stream(store=blueprint).to_chunks():
         batch = chunk.to_record_batch()
         if "ViewBlueprint:class_identifier" in batch.schema.names:
-            found.append((batch.column("ViewBlueprint:class_identifier")[0].as_py()[0],
-                          batch.column("ViewBlueprint:space_origin")[0].as_py()[0]))
+            found.append(
+                (
+                    batch.column("ViewBlueprint:class_identifier")[0].as_py()[0],
+                    batch.column("ViewBlueprint:space_origin")[0].as_py()[0],
+                )
+            )
     return sorted(found)
 
 
@@ -98,12 +120,16 @@ def test_a_rollout_of_only_metrics_records_the_scenario_and_the_verdict(tmp_path
 
 
 @pytest.fixture(scope="module")
-def full(tmp_path_factory, domain, evaluation):  # noqa: ANN001, ANN201
+def full(tmp_path_factory, domain, evaluation):
     time = np.arange(12) * DT
     rollout = Rollout(
-        dt=DT, time=time, metrics={"completion_time": 9.0},
-        trajectories={"robot/ee": np.linspace([0.4, 0.3, 0.9], [0.6, 0.0, 1.0], 12),
-                      "human/hand": np.linspace([1.0, 0.0, 1.0], [0.7, 0.1, 0.95], 12)},
+        dt=DT,
+        time=time,
+        metrics={"completion_time": 9.0},
+        trajectories={
+            "robot/ee": np.linspace([0.4, 0.3, 0.9], [0.6, 0.0, 1.0], 12),
+            "human/hand": np.linspace([1.0, 0.0, 1.0], [0.7, 0.1, 0.95], 12),
+        },
         series={"belief/goal0": np.linspace(0.5, 1.0, 10), "distance": np.linspace(1.0, 0.0, 12)},
         states={"robot": ["idle"] * 3 + ["reach"] * 6 + ["done"] * 3, "human": ["walk"] * 12},
         events=[(0.1, "reached goal0")],
@@ -155,8 +181,14 @@ def test_grids_are_static_images_with_y_up(full):
 
 def test_the_blueprint_has_a_view_for_each_kind_of_data(full):
     path, _ = full
-    assert views(path) == [("2D", "/grids/human"), ("2D", "/grids/robot"), ("3D", "world"),
-                           ("TextDocument", "scenario"), ("TextLog", "/"), ("TimeSeries", "series")]
+    assert views(path) == [
+        ("2D", "/grids/human"),
+        ("2D", "/grids/robot"),
+        ("3D", "world"),
+        ("TextDocument", "scenario"),
+        ("TextLog", "/"),
+        ("TimeSeries", "series"),
+    ]
 
 
 def test_grid_image_puts_x_right_and_y_up():
@@ -171,8 +203,9 @@ def test_an_unwritable_recording_path_is_a_clear_error(tmp_path, domain, evaluat
     rollout = Rollout(dt=DT, time=np.arange(3) * DT, metrics={})
     (tmp_path / "file").write_text("not a folder")
     with pytest.raises(RecordingError, match="cannot write the recording"):
-        write_recording(tmp_path / "file" / "x.rrd", domain=domain, evaluation=evaluation, rollout=rollout,
-                        recording_id="x")
+        write_recording(
+            tmp_path / "file" / "x.rrd", domain=domain, evaluation=evaluation, rollout=rollout, recording_id="x"
+        )
     with pytest.raises(RecordingError, match="is a folder"):
         write_recording(tmp_path, domain=domain, evaluation=evaluation, rollout=rollout, recording_id="x")
 
@@ -183,13 +216,15 @@ TICKS = 6
 
 
 @pytest.fixture(scope="module")
-def scene(tmp_path_factory, domain, evaluation):  # noqa: ANN001, ANN201
+def scene(tmp_path_factory, domain, evaluation):
     from hritest.sim import SceneReplay, World
     from hritest.sim.layout import Box, WorldLayout
 
-    layout = WorldLayout(table=Box(name="table", center=(0.6, 0.05, 0.845), half_size=(0.2, 0.3, 0.021)),
-                         objects=(Box(name="goal0", center=(0.6, 0.1, 0.9), half_size=(0.03, 0.03, 0.03)),),
-                         hand_start=(0.9, 0.0, 1.0))
+    layout = WorldLayout(
+        table=Box(name="table", center=(0.6, 0.05, 0.845), half_size=(0.2, 0.3, 0.021)),
+        objects=(Box(name="goal0", center=(0.6, 0.1, 0.9), half_size=(0.03, 0.03, 0.03)),),
+        hand_start=(0.9, 0.0, 1.0),
+    )
     world = World(layout=layout)
     tracer = world.tracer()
     for tick in range(TICKS):
@@ -216,9 +251,12 @@ def test_every_body_is_drawn_with_its_geoms(scene):
         assert ("Mesh3D:vertex_positions" in shapes) == (kinds["mesh"] > 0)
         capsules = [g for g in geoms if g.kind == "capsule"]
         assert len(shapes.get("Capsules3D:lengths", [])) == len(capsules)
-        for capsule, start, xyzw, length in zip(capsules, shapes.get("Capsules3D:translations", []),
-                                                shapes.get("Capsules3D:quaternions", []),
-                                                shapes.get("Capsules3D:lengths", [])):
+        for capsule, start, xyzw, length in zip(
+            capsules,
+            shapes.get("Capsules3D:translations", []),
+            shapes.get("Capsules3D:quaternions", []),
+            shapes.get("Capsules3D:lengths", []),
+        ):
             middle = np.array(start) + _rotate(xyzw, [0.0, 0.0, length / 2])  # rerun's starts at one end
             np.testing.assert_allclose(middle, capsule.pos, atol=1e-5)
     assert views(path) == [("3D", "world"), ("TextDocument", "scenario"), ("TextLog", "/")]  # no series view
@@ -256,7 +294,7 @@ def test_a_scene_that_no_longer_compiles_is_left_out_with_a_warning(tmp_path, do
     assert ("3D", "world") not in views(path)
 
 
-def _rotate(xyzw, v) -> np.ndarray:  # noqa: ANN001
+def _rotate(xyzw, v) -> np.ndarray:
     x, y, z, w = xyzw
     q = np.array([x, y, z])
     v = np.asarray(v, dtype=float)

@@ -24,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hritest.evaluate import Evaluation, evaluate
+from hritest.evaluate import evaluate
+from hritest.records import Evaluation, Status
 
 
 @dataclass(frozen=True)
@@ -81,7 +82,7 @@ def run_job(ref: DomainRef, job: Job, timeout: float) -> Evaluation:
     try:
         return evaluate(domain, job.theta, seed=job.seed)
     except EvaluationTimeout:
-        return _failed(job, "timeout", f"the evaluation ran past its {timeout:g} s limit and was stopped")
+        return _failed(job, Status.TIMEOUT, f"the evaluation ran past its {timeout:g} s limit and was stopped")
     finally:
         if on_main and timeout > 0:
             signal.setitimer(signal.ITIMER_REAL, 0)
@@ -92,10 +93,17 @@ def _raise_timeout(signum, frame) -> None:  # noqa: ANN001
     raise EvaluationTimeout
 
 
-def _failed(job: Job, status: str, message: str) -> Evaluation:
+def _failed(job: Job, status: Status, message: str) -> Evaluation:
     theta = np.asarray(job.theta, dtype=float)
-    return Evaluation(theta=theta, theta_repaired=theta, repair_cost=float("nan"), regions={}, seed=job.seed,
-                      status=status, message=message)
+    return Evaluation(
+        theta=theta,
+        theta_repaired=theta,
+        repair_cost=float("nan"),
+        regions={},
+        seed=job.seed,
+        status=status,
+        message=message,
+    )
 
 
 def local_pool(workers: int) -> cf.ProcessPoolExecutor:
@@ -114,8 +122,15 @@ class Evaluator:
             submission, so a job's time in the queue is covered by the slack) is killed.
     """
 
-    def __init__(self, *, ref: DomainRef, make_executor: Callable[[], cf.Executor], workers: int,
-                 timeout: float, on_close: Callable[[], None] = lambda: None) -> None:
+    def __init__(
+        self,
+        *,
+        ref: DomainRef,
+        make_executor: Callable[[], cf.Executor],
+        workers: int,
+        timeout: float,
+        on_close: Callable[[], None] = lambda: None,
+    ) -> None:
         self.ref, self.make_executor, self.workers, self.timeout = ref, make_executor, workers, timeout
         self.on_close = on_close
         self.executor = make_executor()
@@ -126,11 +141,11 @@ class Evaluator:
 
     def run(self, jobs: Iterable[Job], on_result: Callable[[Job, Evaluation], None]) -> None:
         """Evaluates every job, calling ``on_result`` for each as it finishes (in any order)."""
-        queue = list(jobs)[::-1]          # pop() takes them in order
-        suspects: list[Job] = []          # jobs in flight when a worker died: rerun one at a time
+        queue = list(jobs)[::-1]  # pop() takes them in order
+        suspects: list[Job] = []  # jobs in flight when a worker died: rerun one at a time
         attempts: dict[int, int] = {}
         running: dict[cf.Future, tuple[Job, float]] = {}
-        isolated: set[int] = set()        # suspects submitted: nothing may run beside them
+        isolated: set[int] = set()  # suspects submitted: nothing may run beside them
         while queue or suspects or running:
             alone = suspects or any(job.index in isolated for job, _ in running.values())
             capacity = 1 if alone else 2 * self.workers  # one queued per worker: no idle gap
@@ -154,9 +169,14 @@ class Evaluator:
             if not done and self._kill_stuck(running):
                 for job, started in running.values():
                     if time.monotonic() - started >= self._hard_limit:
-                        self._retry_or_report(job, attempts, queue, on_result, "timeout",
-                                              f"the evaluation ran past {self._hard_limit:g} s and its worker "
-                                              "was killed")
+                        self._retry_or_report(
+                            job,
+                            attempts,
+                            queue,
+                            on_result,
+                            Status.TIMEOUT,
+                            f"the evaluation ran past {self._hard_limit:g} s and its worker was killed",
+                        )
                     else:
                         queue.append(job)  # an innocent bystander: no attempt counted
                 self._restart(running)
@@ -168,11 +188,17 @@ class Evaluator:
                     evaluation = future.result()
                 except (BrokenProcessPool, cf.CancelledError):
                     broken = True
-                    self._retry_or_report(job, attempts, suspects, on_result, "crashed",
-                                          "the worker process died while evaluating this scenario")
+                    self._retry_or_report(
+                        job,
+                        attempts,
+                        suspects,
+                        on_result,
+                        Status.CRASHED,
+                        "the worker process died while evaluating this scenario",
+                    )
                     continue
-                except Exception as exc:  # noqa: BLE001 - e.g. a pickling problem or a lost Dask worker
-                    evaluation = _failed(job, "crashed", f"{type(exc).__name__}: {exc}")
+                except Exception as exc:
+                    evaluation = _failed(job, Status.CRASHED, f"{type(exc).__name__}: {exc}")
                 if evaluation.ok or attempts.get(job.index, 0) >= 1:
                     on_result(job, _note_retry(evaluation, attempts.get(job.index, 0)))
                 else:
@@ -181,12 +207,19 @@ class Evaluator:
             if broken:
                 self._crashed(running, attempts, suspects, on_result)
 
-    def _crashed(self, running: dict, attempts: dict[int, int], suspects: list[Job],
-                 on_result: Callable[[Job, Evaluation], None]) -> None:
+    def _crashed(
+        self, running: dict, attempts: dict[int, int], suspects: list[Job], on_result: Callable[[Job, Evaluation], None]
+    ) -> None:
         """A worker died: every job in flight becomes a suspect, rerun alone, then the pool restarts."""
         for job, _ in running.values():
-            self._retry_or_report(job, attempts, suspects, on_result, "crashed",
-                                  "the worker process died while evaluating this scenario")
+            self._retry_or_report(
+                job,
+                attempts,
+                suspects,
+                on_result,
+                Status.CRASHED,
+                "the worker process died while evaluating this scenario",
+            )
         self._restart(running)
 
     @property
@@ -198,8 +231,15 @@ class Evaluator:
         _shutdown(self.executor)
         self.executor = self.make_executor()
 
-    def _retry_or_report(self, job: Job, attempts: dict[int, int], again: list[Job],
-                         on_result: Callable[[Job, Evaluation], None], status: str, message: str) -> None:
+    def _retry_or_report(
+        self,
+        job: Job,
+        attempts: dict[int, int],
+        again: list[Job],
+        on_result: Callable[[Job, Evaluation], None],
+        status: Status,
+        message: str,
+    ) -> None:
         if attempts.get(job.index, 0) >= 1:
             on_result(job, _failed(job, status, message + " (also on its retry)"))
         else:

@@ -17,7 +17,7 @@ import numpy as np
 import yaml
 
 from hritest.domain import Domain
-from hritest.evaluate import Evaluation
+from hritest.records import Evaluation
 from hritest.rundir import RunDirectory
 from hritest.search import algorithms, archives
 from hritest.search.executor import Evaluator, Job
@@ -86,14 +86,24 @@ class Search:
         self.summarised = -math.inf
 
     @classmethod
-    def new(cls, *, domain: Domain, run: RunDirectory, algorithm: str, budget: int, seed: int,
-            options: SurrogateOptions | None = None) -> Search:
+    def new(
+        cls,
+        *,
+        domain: Domain,
+        run: RunDirectory,
+        algorithm: str,
+        budget: int,
+        seed: int,
+        options: SurrogateOptions | None = None,
+    ) -> Search:
         if algorithm in SURROGATE:
-            proposer = SurrogateAssisted(domain, gradients=algorithm == "dsas", seed=seed,
-                                         options=options or SurrogateOptions())
+            proposer = SurrogateAssisted(
+                domain, gradients=algorithm == "dsas", seed=seed, options=options or SurrogateOptions()
+            )
         else:
-            proposer = ModelFree(algorithms.scheduler(domain, algorithm, archives.search_archive(domain, seed=seed),
-                                                      seed=seed))
+            proposer = ModelFree(
+                algorithms.scheduler(domain, algorithm, archives.search_archive(domain, seed=seed), seed=seed)
+            )
         state = {
             "algorithm": algorithm,
             "budget": budget,
@@ -142,13 +152,20 @@ class Search:
             solutions = state["proposer"].ask(self)
             state["batch"] += 1
             count = min(len(solutions), state["budget"] - state["evaluations"])
-            state["pending"] = {"batch": state["batch"], "solutions": solutions, "first": state["evaluations"],
-                                "count": count}
+            state["pending"] = {
+                "batch": state["batch"],
+                "solutions": solutions,
+                "first": state["evaluations"],
+                "count": count,
+            }
             self.run_dir.save_checkpoint(state)
         pending = state["pending"]
         first, count, batch = pending["first"], pending["count"], pending["batch"]
-        jobs = [Job(first + i, pending["solutions"][i], evaluation_seed(state["seed"], first + i))
-                for i in range(count) if first + i not in self.records]
+        jobs = [
+            Job(first + i, pending["solutions"][i], evaluation_seed(state["seed"], first + i))
+            for i in range(count)
+            if first + i not in self.records
+        ]
 
         done = [count - len(jobs)]  # of this batch, finished before (a resumed batch) or now
 
@@ -168,11 +185,18 @@ class Search:
         state["elapsed"] += time.monotonic() - started
         summary = archives.Summary.of(state["result"], self.domain.spec.objective.range)
         failures = self.failures()
-        state["progress"].append({
-            "evaluations": state["evaluations"], "batch": batch, "wall_time": round(state["elapsed"], 3),
-            "qd_score": summary.qd_score, "normalized_qd_score": summary.normalized_qd_score,
-            "coverage": summary.coverage, "best": summary.best, "failures": len(failures),
-        })
+        state["progress"].append(
+            {
+                "evaluations": state["evaluations"],
+                "batch": batch,
+                "wall_time": round(state["elapsed"], 3),
+                "qd_score": summary.qd_score,
+                "normalized_qd_score": summary.normalized_qd_score,
+                "coverage": summary.coverage,
+                "best": summary.best,
+                "failures": len(failures),
+            }
+        )
         self.run_dir.save_checkpoint(state)
         if self.done or time.monotonic() - self.summarised >= SUMMARY_SECONDS:
             self.write_summaries(failures)
@@ -200,11 +224,14 @@ class Search:
         lo, hi = self.domain.spec.objective.range
         order = [r["index"] for r in self.run_dir.evaluations()]
         grids = self.run_dir.occupancy(self.occupancy_shape)[: len(order)]
-        rows = sorted(((i, self.records[index]) for i, index in enumerate(order)
-                       if self.records[index]["status"] == "ok"), key=lambda row: row[1]["index"])
+        rows = sorted(
+            ((i, self.records[index]) for i, index in enumerate(order) if self.records[index]["status"] == "ok"),
+            key=lambda row: row[1]["index"],
+        )
         theta = np.array([r["theta"] for _, r in rows], dtype=np.float32).reshape(len(rows), -1)
-        targets = np.array([[r["search_objective"] / (hi - lo), *r["measures"]] for _, r in rows],
-                           dtype=np.float32).reshape(len(rows), -1)
+        targets = np.array(
+            [[r["search_objective"] / (hi - lo), *r["measures"]] for _, r in rows], dtype=np.float32
+        ).reshape(len(rows), -1)
         return theta, grids[[i for i, _ in rows]], targets
 
     def snapshot(self, extra: int = 0) -> Snapshot:
@@ -220,20 +247,41 @@ class Search:
         names = [m.name for m in self.domain.measures]
         labels = self.domain.space.labels
         self.run_dir.write_csv("progress.csv", self.state["progress"])
-        elites = sorted((self.records[int(i)] for i in self.state["result"].data("evaluation")),
-                        key=lambda r: -r["objective"])
-        self.run_dir.write_csv("archive.csv", [
-            {"evaluation": r["index"], "objective": r["objective"], **dict(zip(names, r["measures"])),
-             **dict(zip(labels, r["theta_repaired"])), "failure": r["failure"]}
-            for r in elites
-        ])
-        self.run_dir.write_text("failures.yaml", yaml.safe_dump({
-            "spec": self.run_dir.meta.get("spec_file"),
-            "failure": self.domain.spec.failure,
-            "failures": [
-                {"id": r["index"], "objective": r["objective"], "measures": dict(zip(names, r["measures"])),
-                 "theta": dict(zip(labels, r["theta_repaired"])), "theta_raw": r["theta"],
-                 "repair_cost": r["repair_cost"], "seed": r["seed"]}
-                for r in failures
+        elites = sorted(
+            (self.records[int(i)] for i in self.state["result"].data("evaluation")), key=lambda r: -r["objective"]
+        )
+        self.run_dir.write_csv(
+            "archive.csv",
+            [
+                {
+                    "evaluation": r["index"],
+                    "objective": r["objective"],
+                    **dict(zip(names, r["measures"])),
+                    **dict(zip(labels, r["theta_repaired"])),
+                    "failure": r["failure"],
+                }
+                for r in elites
             ],
-        }, sort_keys=False))
+        )
+        self.run_dir.write_text(
+            "failures.yaml",
+            yaml.safe_dump(
+                {
+                    "spec": self.run_dir.meta.get("spec_file"),
+                    "failure": self.domain.spec.failure,
+                    "failures": [
+                        {
+                            "id": r["index"],
+                            "objective": r["objective"],
+                            "measures": dict(zip(names, r["measures"])),
+                            "theta": dict(zip(labels, r["theta_repaired"])),
+                            "theta_raw": r["theta"],
+                            "repair_cost": r["repair_cost"],
+                            "seed": r["seed"],
+                        }
+                        for r in failures
+                    ],
+                },
+                sort_keys=False,
+            ),
+        )

@@ -68,6 +68,24 @@ class Expression:
         """Evaluates with ``env`` mapping each name to a number or an array."""
         return _evaluate(self.tree, env)
 
+    def clauses(self) -> tuple[Expression, ...]:
+        """The operands of a top-level ``or`` / ``and``, each as an expression of its own; else itself.
+
+        A failure condition ``objective >= 15 or approach >= 0.3`` has two clauses: reports say which
+        of them held, so a safety failure is told apart from a slow one.
+        """
+        if not isinstance(self.tree, ast.BoolOp):
+            return (self,)
+        return tuple(
+            Expression(
+                text=ast.unparse(child),
+                tree=child,
+                names=frozenset(n.id for n in ast.walk(child) if isinstance(n, ast.Name) and n.id not in FUNCTIONS),
+                is_condition=True,
+            )
+            for child in self.tree.values
+        )
+
 
 def parse(text: str, *, condition: bool = False) -> Expression:
     """Parses ``text``; ``condition=True`` requires a comparison (a failure condition).
