@@ -237,11 +237,14 @@ def simulate(
     json: JsonOption = False,
 ) -> None:
     """Simulate one scenario: status, objective, measures and every metric. Exit 1 if it is a failure."""
+    from hritest.records import clauses_text
+
     domain, values = _domain_and_theta(spec, theta)
     evaluation = domain.evaluate(values, seed=seed)
     data = {
         "status": evaluation.status,
         "failure": evaluation.failure,
+        "clauses": [c.to_json() for c in evaluation.clauses],
         "objective": evaluation.objective,
         "search_objective": evaluation.search_objective,
         "measures": dict(zip((m.name for m in domain.measures), evaluation.measures.tolist())),
@@ -259,6 +262,8 @@ def simulate(
     else:
         verdict = "[red]FAILURE[/red]" if evaluation.failure else "[green]no failure[/green]"
         out.print(f"{evaluation.status}: {verdict} ({domain.spec.failure}), simulated in {evaluation.seconds:.3f} s")
+        if evaluation.fired:
+            out.print(f"why: {escape(clauses_text(evaluation.fired))}", highlight=False)
         table = Table(show_header=False)
         rows = [
             ("objective", evaluation.objective),

@@ -292,7 +292,7 @@ def promote(run_path: Path, *, corpus: Path, top: int | None = None) -> list[Pro
             f"{spec_file} changed since the run {run.path} started, so its failures would be "
             "stale at once; run a new search with the current spec and promote from that"
         )
-    records = {r["index"]: r for r in run.evaluations()}
+    records = {r.index: r for r in run.evaluations()}
     ids = replay.failure_ids(run, list(records.values()))
     chosen = ids if top is None else ids[:top]
     if not chosen:
@@ -304,7 +304,7 @@ def promote(run_path: Path, *, corpus: Path, top: int | None = None) -> list[Pro
     done = []
     for index in chosen:
         record = records[index]
-        scenario = replay.scenario_digest(spec_digest, record["theta_repaired"], record["seed"])
+        scenario = replay.scenario_digest(spec_digest, record.theta_repaired, record.seed)
         path = folder / f"{scenario[:12]}.yaml"
         added = not path.exists()
         if added:
@@ -315,12 +315,13 @@ def promote(run_path: Path, *, corpus: Path, top: int | None = None) -> list[Pro
                 "spec_name": domain.spec.name,
                 "spec_digest": spec_digest,
                 "failure_condition": domain.spec.failure,
-                "seed": int(record["seed"]),
-                "objective": record["objective"],
-                "measures": {m.name: v for m, v in zip(domain.measures, record["measures"])},
-                "theta": dict(zip(labels, record["theta"])),
-                "theta_repaired": dict(zip(labels, record["theta_repaired"])),
-                "metrics": dict(record.get("metrics") or {}),
+                "seed": record.seed,
+                "objective": record.objective,
+                "why": [str(c) for c in record.fired],
+                "measures": {m.name: v for m, v in zip(domain.measures, record.measures)},
+                "theta": dict(zip(labels, record.theta)),
+                "theta_repaired": dict(zip(labels, record.theta_repaired)),
+                "metrics": dict(record.metrics),
                 "scenario_digest": scenario,
                 "versions": {
                     k: v
@@ -334,7 +335,7 @@ def promote(run_path: Path, *, corpus: Path, top: int | None = None) -> list[Pro
                 },
             }
             atomic_write(path, dump_entry(data))
-        done.append(Promoted(path=path, evaluation=index, objective=record["objective"], added=added))
+        done.append(Promoted(path=path, evaluation=index, objective=record.objective, added=added))
     return done
 
 

@@ -374,7 +374,7 @@ def _domain(config: pytest.Config, spec: Path) -> Any:
 
 
 def _replay(domain: Any, entry: hc.Entry) -> Any:
-    from hritest.replay import replay_record
+    from hritest.replay import replay_outcome
 
     labels = list(domain.space.labels)
     if list(entry.theta) != labels:
@@ -382,16 +382,20 @@ def _replay(domain: Any, entry: hc.Entry) -> Any:
             f"{entry.path}: field 'theta' has components {', '.join(entry.theta)}, but "
             f"{entry.spec_name}'s theta is {', '.join(labels)}"
         )
-    record = {
-        "index": entry.id,
-        "theta": list(entry.theta.values()),
-        "seed": entry.seed,
+    stored = {
         "status": "ok",
         "failure": True,
         "objective": entry.objective,
         "measures": [entry.measures.get(m.name) for m in domain.measures],
     }
-    return replay_record(domain, record, spec_digest=entry.spec_digest)
+    return replay_outcome(
+        domain,
+        theta=list(entry.theta.values()),
+        seed=entry.seed,
+        stored=stored,
+        against=f"corpus entry {entry.id}",
+        spec_digest=entry.spec_digest,
+    )
 
 
 def _then_now(replayed: Any) -> str:

@@ -7,7 +7,7 @@ Every status an evaluation can end with is a :class:`Status`; nothing compares s
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any
@@ -94,13 +94,159 @@ class Evaluation:
         return tuple(c for c in self.clauses if c.holds)
 
 
+@dataclass(frozen=True, kw_only=True)
+class EvaluationRecord:
+    """One line of a run's ``evaluations.jsonl``: an :class:`Evaluation` without its grids (stored
+    apart), with its place in the search. Read back with :meth:`from_json`, which also reads the
+    lines of run directories written before clauses were recorded.
+
+    Numbers that are not finite (an evaluation that never produced them) are NaN here and
+    ``null`` in JSON.
+    """
+
+    index: int
+    batch: int
+    status: Status
+    failure: bool
+    objective: float
+    search_objective: float
+    measures: tuple[float, ...]
+    repair_cost: float
+    regions: Mapping[str, str | None]
+    theta: tuple[float, ...]
+    theta_repaired: tuple[float, ...]
+    metrics: Mapping[str, float]
+    seed: int
+    seconds: float
+    message: str = ""
+    clauses: tuple[Clause, ...] = ()
+
+    @property
+    def ok(self) -> bool:
+        return self.status is Status.OK
+
+    @property
+    def fired(self) -> tuple[Clause, ...]:
+        """The failure condition's clauses that held."""
+        return tuple(c for c in self.clauses if c.holds)
+
+    @classmethod
+    def of(cls, evaluation: Evaluation, *, index: int, batch: int) -> EvaluationRecord:
+        return cls(
+            index=index,
+            batch=batch,
+            status=evaluation.status,
+            failure=evaluation.failure,
+            objective=float(evaluation.objective),
+            search_objective=float(evaluation.search_objective),
+            measures=tuple(float(v) for v in evaluation.measures),
+            repair_cost=float(evaluation.repair_cost),
+            regions=dict(evaluation.regions),
+            theta=tuple(float(v) for v in np.asarray(evaluation.theta).ravel()),
+            theta_repaired=tuple(float(v) for v in np.asarray(evaluation.theta_repaired).ravel()),
+            metrics={k: float(v) for k, v in evaluation.metrics.items()},
+            seed=int(evaluation.seed),
+            seconds=float(evaluation.seconds),
+            message=evaluation.message,
+            clauses=evaluation.clauses,
+        )
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "index": self.index,
+            "batch": self.batch,
+            "status": self.status.value,
+            "failure": self.failure,
+            "objective": _number(self.objective),
+            "search_objective": _number(self.search_objective),
+            "measures": [_number(v) for v in self.measures],
+            "repair_cost": _number(self.repair_cost),
+            "regions": dict(self.regions),
+            "theta": list(self.theta),
+            "theta_repaired": list(self.theta_repaired),
+            "metrics": {k: _number(v) for k, v in self.metrics.items()},
+            "seed": self.seed,
+            "seconds": round(self.seconds, 6),
+            "message": self.message,
+            "clauses": [c.to_json() for c in self.clauses],
+        }
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> EvaluationRecord:
+        """Raises KeyError, ValueError or TypeError on a line that is not a record."""
+        return cls(
+            index=int(data["index"]),
+            batch=int(data.get("batch", 0)),
+            status=Status.parse(data["status"]),
+            failure=bool(data["failure"]),
+            objective=_float(data["objective"]),
+            search_objective=_float(data.get("search_objective", data["objective"])),
+            measures=tuple(_float(v) for v in data["measures"]),
+            repair_cost=_float(data.get("repair_cost", 0.0)),
+            regions=dict(data.get("regions") or {}),
+            theta=tuple(float(v) for v in data["theta"]),
+            theta_repaired=tuple(float(v) for v in data["theta_repaired"]),
+            metrics={k: _float(v) for k, v in (data.get("metrics") or {}).items()},
+            seed=int(data["seed"]),
+            seconds=float(data.get("seconds", 0.0)),
+            message=str(data.get("message", "")),
+            clauses=tuple(Clause.from_json(c) for c in data.get("clauses", ())),
+        )
+
+    def __getitem__(self, key: str) -> Any:
+        # Transitional, while the modules that read records by key move to attributes; the JSON
+        # form's value (None for a non-finite number), as those readers expect.
+        return self.to_json()[key]
+
+
+def rank_failures(records: Iterable[EvaluationRecord]) -> list[EvaluationRecord]:
+    """Failures worst first: the one order the report, ``failures.yaml``, replay and promote share.
+
+    Highest objective first; ties by the evaluation's index, so two runs of a seed agree.
+    """
+    found = [r for r in records if r.failure]
+    return sorted(found, key=lambda r: (-_or(r.objective, -math.inf), r.index))
+
+
+def worst_of_each_clause(failures: Sequence[EvaluationRecord]) -> dict[str, EvaluationRecord]:
+    """For each clause that fired in some failure, the worst failure it fired in (``failures``
+    ranked by :func:`rank_failures`): a safety clause is represented even when its failures are
+    not among the highest objectives."""
+    worst: dict[str, EvaluationRecord] = {}
+    for record in failures:
+        for clause in record.fired:
+            worst.setdefault(clause.text, record)
+    return worst
+
+
 def clauses_text(clauses: Sequence[Clause]) -> str:
     """``objective >= 15 (objective=17.2); approach >= 0.3 (approach=0.41)``: one line for humans."""
     return "; ".join(map(str, clauses))
+
+
+def _number(value: float) -> float | None:
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+def _float(value: float | None) -> float:
+    return math.nan if value is None else float(value)
+
+
+def _or(value: float, default: float) -> float:
+    return value if math.isfinite(value) else default
 
 
 def _short(value: float) -> str:
     return f"{value:.4g}" if isinstance(value, float) else str(value)
 
 
-__all__ = ["Clause", "Evaluation", "Status", "clauses_text"]
+__all__ = [
+    "Clause",
+    "Evaluation",
+    "EvaluationRecord",
+    "Status",
+    "clauses_text",
+    "rank_failures",
+    "worst_of_each_clause",
+]

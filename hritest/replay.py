@@ -27,7 +27,7 @@ from hritest.domain import Domain, compile_spec
 from hritest.errors import HritestError
 from hritest.evaluate import evaluate_with_rollout
 from hritest.protocols import Rollout
-from hritest.records import Evaluation
+from hritest.records import Evaluation, EvaluationRecord, rank_failures
 from hritest.rundir import RunDirectory
 from hritest.spec import load_spec
 
@@ -139,7 +139,7 @@ def run_domain(run: RunDirectory) -> Domain:
     return compile_spec(load_spec(run.path / "spec.yaml"), base=Path(base) if base else None)
 
 
-def failure_ids(run: RunDirectory, records: Sequence[Mapping[str, Any]]) -> list[int]:
+def failure_ids(run: RunDirectory, records: Sequence[EvaluationRecord]) -> list[int]:
     """The ids of the run's reported failures (``failures.yaml``, worst first).
 
     A run killed before its first summary has no ``failures.yaml``; then every evaluation
@@ -149,12 +149,10 @@ def failure_ids(run: RunDirectory, records: Sequence[Mapping[str, Any]]) -> list
     if path.is_file():
         data = yaml.safe_load(path.read_text()) or {}
         return [int(f["id"]) for f in data.get("failures") or []]
-    return [
-        int(r["index"]) for r in sorted(records, key=lambda r: (-(r["objective"] or 0), r["index"])) if r.get("failure")
-    ]
+    return [r.index for r in rank_failures(records)]
 
 
-def stored_failure(run: RunDirectory, failure_id: int) -> dict[str, Any]:
+def stored_failure(run: RunDirectory, failure_id: int) -> EvaluationRecord:
     """The evaluation record of failure ``failure_id``.
 
     Raises:
@@ -169,24 +167,45 @@ def stored_failure(run: RunDirectory, failure_id: int) -> dict[str, Any]:
         listed = ", ".join(map(str, ids[:50])) + (f", ... ({len(ids)} in all)" if len(ids) > 50 else "")
         known = f"its failures (worst first) are: {listed}" if ids else "it has no failures"
         raise UnknownFailureError(f"{run.path} has no failure with id {failure_id}; {known}")
-    return next(r for r in records if r["index"] == failure_id)
+    return next(r for r in records if r.index == failure_id)
 
 
 def replay_record(
-    domain: Domain, record: Mapping[str, Any], *, spec_digest: str, tolerance: float = TOLERANCE
+    domain: Domain, record: EvaluationRecord, *, spec_digest: str, tolerance: float = TOLERANCE
 ) -> Replay:
     """Re-simulates a stored evaluation record (its raw ``theta`` and ``seed``) and compares."""
-    evaluation, rollout = evaluate_with_rollout(
-        domain, np.asarray(record["theta"], dtype=float), seed=int(record["seed"])
+    return replay_outcome(
+        domain,
+        theta=record.theta,
+        seed=record.seed,
+        stored=record.to_json(),
+        against=f"evaluation {record.index} as stored in evaluations.jsonl",
+        spec_digest=spec_digest,
+        tolerance=tolerance,
     )
-    checks = compare(record, outcome_of(evaluation), [m.name for m in domain.measures], tolerance=tolerance)
+
+
+def replay_outcome(
+    domain: Domain,
+    *,
+    theta: Sequence[float],
+    seed: int,
+    stored: Mapping[str, Any],
+    against: str,
+    spec_digest: str,
+    tolerance: float = TOLERANCE,
+) -> Replay:
+    """Re-simulates raw ``theta`` with ``seed`` and compares with a ``stored`` outcome (status,
+    failure, objective, measures as :func:`outcome_of` gives them); ``against`` says what that was."""
+    evaluation, rollout = evaluate_with_rollout(domain, np.asarray(theta, dtype=float), seed=int(seed))
+    checks = compare(stored, outcome_of(evaluation), [m.name for m in domain.measures], tolerance=tolerance)
     return Replay(
         domain=domain,
         evaluation=evaluation,
         rollout=rollout,
         digest=scenario_digest(spec_digest, evaluation.theta_repaired, evaluation.seed),
         checks=checks,
-        against=f"evaluation {record['index']} as stored in evaluations.jsonl",
+        against=against,
         tolerance=tolerance,
     )
 

@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from hritest.errors import HritestError
+from hritest.records import EvaluationRecord
 
 RUN_FILE = "run.json"
 FORMAT = 1
@@ -153,15 +154,15 @@ class RunDirectory:
 
     # --- evaluations -------------------------------------------------------------------------
 
-    def append(self, record: dict[str, Any], occupancy: np.ndarray | None, shape: tuple[int, ...]) -> None:
+    def append(self, record: EvaluationRecord, occupancy: np.ndarray | None, shape: tuple[int, ...]) -> None:
         """Appends one evaluation: its occupancy record first, then its line (which commits it)."""
         grid = np.zeros(shape, np.float32) if occupancy is None else np.asarray(occupancy, np.float32)
         with open(self.path / "occupancy.f32", "ab") as handle:
             handle.write(grid.tobytes())
         with open(self.path / "evaluations.jsonl", "a") as handle:
-            handle.write(json.dumps(record, separators=(",", ":")) + "\n")
+            handle.write(json.dumps(record.to_json(), separators=(",", ":")) + "\n")
 
-    def evaluations(self) -> list[dict[str, Any]]:
+    def evaluations(self) -> list[EvaluationRecord]:
         """Every committed evaluation, in order (a torn last line from a kill is dropped)."""
         path = self.path / "evaluations.jsonl"
         if not path.exists():
@@ -170,10 +171,14 @@ class RunDirectory:
         records = []
         for number, line in enumerate(lines, start=1):
             try:
-                records.append(json.loads(line))
+                records.append(EvaluationRecord.from_json(json.loads(line)))
             except json.JSONDecodeError:
                 if number != len(lines):
                     raise RunDirectoryError(f"{path}:{number} is corrupt; the run cannot be read") from None
+            except (KeyError, ValueError, TypeError) as exc:
+                raise RunDirectoryError(
+                    f"{path}:{number} is not an evaluation record ({type(exc).__name__}: {exc}); the run cannot be read"
+                ) from None
         return records
 
     def occupancy(self, shape: tuple[int, ...]) -> np.ndarray:

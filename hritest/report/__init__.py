@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import os
 from collections import Counter
 from collections.abc import Mapping, Sequence
@@ -21,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from hritest.records import EvaluationRecord, clauses_text, rank_failures, worst_of_each_clause
 from hritest.report import figures
 from hritest.report.html import Badge, Code, Details, Document, Figure, Link, Section, Table, Text, to_html, to_markdown
 from hritest.rundir import RunDirectory, atomic_write
@@ -39,10 +41,10 @@ class RunData:
     path: Path
     meta: Mapping[str, Any]
     spec: Any  # hritest.spec.Spec
-    records: Sequence[Mapping[str, Any]]
+    records: Sequence[EvaluationRecord]
     progress: Sequence[Mapping[str, float]]
-    elites: Sequence[Mapping[str, Any]]
-    failures: Sequence[Mapping[str, Any]]  # records of the reported failures, worst first
+    elites: Sequence[EvaluationRecord]
+    failures: Sequence[EvaluationRecord]  # the reported failures, worst first
     surrogate: Mapping[str, Any] | None
 
     @property
@@ -87,7 +89,7 @@ def load_run(path: Path) -> RunData:
             "Run 'hritest search --resume' on it, or start a new search"
         )
     spec = load_spec(run.path / "spec.yaml")
-    by_index = {int(r["index"]): r for r in records}
+    by_index = {r.index: r for r in records}
     elite_ids = _elite_ids(run)
     surrogate = run.path / "surrogate.json"
     return RunData(
@@ -124,42 +126,46 @@ def _elite_ids(run: RunDirectory) -> list[int]:
 # --- choosing what to show (pure) ------------------------------------------------------------
 
 
-def worst_failures(failures: Sequence[Mapping[str, Any]], count: int) -> list[Mapping[str, Any]]:
-    """The ``count`` failures with the highest objective (ties: lowest id first)."""
-    return sorted(failures, key=lambda r: (-(r["objective"] or 0.0), r["index"]))[: max(count, 0)]
+def worst_failures(failures: Sequence[EvaluationRecord], count: int) -> list[EvaluationRecord]:
+    """The ``count`` worst failures, in :func:`hritest.records.rank_failures`' order."""
+    return rank_failures(failures)[: max(count, 0)]
 
 
 def most_different(
-    failures: Sequence[Mapping[str, Any]], ranges: Sequence[tuple[float, float]], splits: int = SPLITS
-) -> list[tuple[str, Mapping[str, Any]]]:
+    failures: Sequence[EvaluationRecord], ranges: Sequence[tuple[float, float]], splits: int = SPLITS
+) -> list[tuple[str, EvaluationRecord]]:
     """The worst failure in each block of the measure space, each measure's range cut in ``splits``.
 
     Returns ``(block, failure)`` pairs in block order, e.g. ``("low / high", record)``: the
     failure whose first measure lies in the lowest third of its range and second in the highest.
     """
     names = _BLOCK_NAMES.get(splits, tuple(str(i + 1) for i in range(splits)))
-    best: dict[tuple[int, ...], Mapping[str, Any]] = {}
+    best: dict[tuple[int, ...], EvaluationRecord] = {}
     for record in worst_failures(failures, len(failures)):
-        block = tuple(_block(v, lo, hi, splits) for v, (lo, hi) in zip(record["measures"], ranges))
+        block = tuple(_block(v, lo, hi, splits) for v, (lo, hi) in zip(record.measures, ranges))
         best.setdefault(block, record)
     return [(" / ".join(names[i] for i in block), best[block]) for block in sorted(best)]
 
 
-def _block(value: float | None, lo: float, hi: float, splits: int) -> int:
-    if value is None or hi <= lo:
+def _block(value: float, lo: float, hi: float, splits: int) -> int:
+    if not math.isfinite(value) or hi <= lo:
         return 0
     return int(min(max((value - lo) / (hi - lo) * splits, 0), splits - 1))
 
 
 def chosen_failures(
-    failures: Sequence[Mapping[str, Any]], ranges: Sequence[tuple[float, float]], count: int
-) -> list[Mapping[str, Any]]:
-    """The failures to record: the ``count`` worst and the most different ones (none when 0)."""
+    failures: Sequence[EvaluationRecord], ranges: Sequence[tuple[float, float]], count: int
+) -> list[EvaluationRecord]:
+    """The failures to record: the ``count`` worst, the worst of each failure clause and the most
+    different ones (none when 0): every failure the report's tables show."""
     if count <= 0:
         return []
-    chosen = {r["index"]: r for r in worst_failures(failures, count)}
-    for _, record in most_different(failures, ranges):
-        chosen.setdefault(record["index"], record)
+    chosen = {r.index: r for r in worst_failures(failures, count)}
+    for record in [
+        *worst_of_each_clause(rank_failures(failures)).values(),
+        *(r for _, r in most_different(failures, ranges)),
+    ]:
+        chosen.setdefault(record.index, record)
     return list(chosen.values())
 
 
@@ -197,7 +203,7 @@ def record_failures(data: RunData, failures: Sequence[Mapping[str, Any]]) -> dic
             recording_id=replay.digest,
             title=f"{data.spec.name}: failure {record['index']} ({data.name})",
         )
-        done[record["index"]] = Recorded(path, replay.matches, tuple(c.name for c in replay.checks if not c.ok))
+        done[record.index] = Recorded(path, replay.matches, tuple(c.name for c in replay.checks if not c.ok))
     return done
 
 
@@ -223,8 +229,8 @@ def write_report(run_path: Path, *, recordings: int = RECORDINGS, out: Path | No
     recorded = record_failures(data, chosen_failures(data.failures, data.ranges, recordings))
     for r in data.failures:  # link what earlier reports or replays recorded
         earlier = data.path / "recordings" / f"{r['index']}.rrd"
-        if r["index"] not in recorded and earlier.is_file():
-            recorded[r["index"]] = Recorded(earlier, None)
+        if r.index not in recorded and earlier.is_file():
+            recorded[r.index] = Recorded(earlier, None)
     doc = run_document(data, recorded, link_base=out, worst_count=max(recordings, RECORDINGS))
     _write(doc, out)
     return out / "index.html"
@@ -257,7 +263,7 @@ def run_document(
     spec = data.spec
     worst = worst_failures(data.failures, worst_count)
     diverse = most_different(data.failures, data.ranges)
-    labelled = [r["index"] for _, r in diverse]  # one per block of the measure space: apart, so readable
+    labelled = [r.index for _, r in diverse]  # one per block of the measure space: apart, so readable
     sections = [Section("The run at a glance", _glance(data))]
     archive_blocks: list = [
         Figure(
@@ -307,11 +313,12 @@ def run_document(
             Section(
                 f"Worst failures ({len(worst)} of {len(data.failures)})",
                 [
-                    _failure_table(data, [("", r) for r in worst], recorded, link_base, regions=False),
+                    _failure_table(data, [("", r) for r in worst], recorded, link_base),
                     Text(_replay_note(data, recorded)),
                 ],
             )
         )
+        sections.append(Section("Why they fail", _clause_blocks(data, recorded, link_base)))
         sections.append(
             Section(
                 f"Most different failures ({len(diverse)} regions)",
@@ -320,7 +327,7 @@ def run_document(
                         f"Each measure's range is cut into {SPLITS}; each row is the worst failure in one block of the "
                         f"measure space ({' / '.join(data.measure_names)})."
                     ),
-                    _failure_table(data, diverse, recorded, link_base, regions=True),
+                    _failure_table(data, diverse, recorded, link_base, label="region"),
                     Details(
                         f"All {len(data.failures)} failures, worst first",
                         [
@@ -329,7 +336,6 @@ def run_document(
                                 [("", r) for r in worst_failures(data.failures, len(data.failures))],
                                 recorded,
                                 link_base,
-                                regions=False,
                             )
                         ],
                     ),
@@ -345,7 +351,7 @@ def run_document(
 
 def _glance(data: RunData) -> list:
     spec, meta, last = data.spec, data.meta, (data.progress[-1] if data.progress else {})
-    statuses = Counter(r["status"] for r in data.records)
+    statuses = Counter(r.status.value for r in data.records)
     cells = 1
     for m in spec.measures:
         cells *= m.cells
@@ -366,7 +372,7 @@ def _glance(data: RunData) -> list:
             f"{last['normalized_qd_score']:.4f}" if "normalized_qd_score" in last else "not recorded",
         ),
         ("coverage", f"{last['coverage']:.2%} of {cells} cells" if "coverage" in last else "not recorded"),
-        ("best objective", f"{max((r['objective'] for r in data.elites), default=float('nan')):.4g}"),
+        ("best objective", f"{max((r.objective for r in data.elites), default=float('nan')):.4g}"),
         ("failures", f"{len(data.failures)} elites meet '{spec.failure}'"),
         ("started", str(meta.get("created", "?"))),
     ]
@@ -417,8 +423,8 @@ def _view(data: RunData, labelled: Sequence[int], title: str | None = None) -> f
         cells=[m.cells for m in spec.measures],
         objective_range=tuple(spec.objective.range),
         objective_label=f"objective: {spec.objective.expr}",
-        elites=[(r["objective"], r["measures"]) for r in data.elites],
-        failures=[(r["index"], r["measures"]) for r in data.failures],
+        elites=[(r.objective, list(r.measures)) for r in data.elites],
+        failures=[(r.index, list(r.measures)) for r in data.failures],
         labelled=labelled,
     )
 
@@ -436,15 +442,17 @@ def _num(value: float | None) -> str:
 
 def _failure_table(
     data: RunData,
-    rows: Sequence[tuple[str, Mapping[str, Any]]],
+    rows: Sequence[tuple[str, EvaluationRecord]],
     recorded: Mapping[int, Recorded],
     link_base: Path,
     *,
-    regions: bool,
+    label: str | None = None,
 ) -> Table:
-    headers = (["region"] if regions else []) + [
+    """A row per failure; with ``label``, a first column of that name holds each row's label."""
+    headers = ([label] if label else []) + [
         "id",
         "objective",
+        "why (clauses that held)",
         *data.measure_names,
         "repair cost",
         "seed",
@@ -454,12 +462,12 @@ def _failure_table(
     labels = data.labels
     table_rows = []
     for block, r in rows:
-        theta = ", ".join(f"{k} {v:.4g}" for k, v in zip(labels, r["theta_repaired"]))
-        found = recorded.get(r["index"])
+        theta = ", ".join(f"{k} {v:.4g}" for k, v in zip(labels, r.theta_repaired))
+        found = recorded.get(r.index)
         if found is None:
             recording: Any = "not recorded"
         else:
-            link = Link(f"{r['index']}.rrd", os.path.relpath(found.path, link_base))
+            link = Link(f"{r.index}.rrd", os.path.relpath(found.path, link_base))
             recording = (
                 link
                 if found.matches is not False
@@ -467,12 +475,13 @@ def _failure_table(
             )
         table_rows.append(
             [
-                *([block] if regions else []),
-                str(r["index"]),
-                _fmt(r["objective"]),
-                *(_fmt(v) for v in r["measures"]),
-                _fmt(r["repair_cost"]),
-                str(r["seed"]),
+                *([block] if label else []),
+                str(r.index),
+                _fmt(r.objective),
+                clauses_text(r.fired) if r.clauses else "not recorded",
+                *(_fmt(v) for v in r.measures),
+                _fmt(r.repair_cost),
+                str(r.seed),
                 Code(theta),
                 recording,
             ]
@@ -480,8 +489,36 @@ def _failure_table(
     return Table(headers, table_rows)
 
 
-def _fmt(value: float | None) -> str:
-    return "—" if value is None else f"{value:.4g}"
+def _fmt(value: float) -> str:
+    return f"{value:.4g}" if math.isfinite(value) else "—"
+
+
+def _clause_blocks(data: RunData, recorded: Mapping[int, Recorded], link_base: Path) -> list:
+    """Each clause of the failure condition: in how many failures it held, and the worst of them."""
+    from hritest.spec import expr
+
+    clauses = [c.text for c in expr.parse(data.spec.failure, condition=True).clauses()]
+    if not any(r.clauses for r in data.failures):
+        return [
+            Text(
+                "This run's evaluations do not record which clause of the failure condition held (a run directory "
+                "written before hritest recorded clauses); replay a failure to see them.",
+                note=True,
+            )
+        ]
+    counts = Counter(c.text for r in data.failures for c in r.fired)
+    worst = worst_of_each_clause(rank_failures(data.failures))
+    table = Table(
+        ["clause of the failure condition", "failures where it held"],
+        [[Code(c), f"{counts[c]} of {len(data.failures)}"] for c in clauses],
+        caption=f"The failure condition '{data.spec.failure}', clause by clause. A failure may meet several.",
+    )
+    rows = [(clause, worst[clause]) for clause in clauses if clause in worst]
+    return [
+        table,
+        Text("The worst failure of each clause that held:"),
+        _failure_table(data, rows, recorded, link_base, label="clause"),
+    ]
 
 
 def _replay_note(data: RunData, recorded: Mapping[int, Recorded]) -> str:

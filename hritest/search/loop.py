@@ -17,7 +17,7 @@ import numpy as np
 import yaml
 
 from hritest.domain import Domain
-from hritest.records import Evaluation
+from hritest.records import Evaluation, EvaluationRecord, rank_failures
 from hritest.rundir import RunDirectory
 from hritest.search import algorithms, archives
 from hritest.search.executor import Evaluator, Job
@@ -45,32 +45,6 @@ def evaluation_seed(seed: int, index: int) -> int:
     return int(np.random.SeedSequence([seed, index]).generate_state(1)[0])
 
 
-def record_of(job: Job, batch: int, evaluation: Evaluation) -> dict:
-    """The JSON line of one evaluation (occupancy grids are stored apart)."""
-    return {
-        "index": job.index,
-        "batch": batch,
-        "status": evaluation.status,
-        "failure": evaluation.failure,
-        "objective": _number(evaluation.objective),
-        "search_objective": _number(evaluation.search_objective),
-        "measures": [_number(v) for v in evaluation.measures],
-        "repair_cost": _number(evaluation.repair_cost),
-        "regions": evaluation.regions,
-        "theta": np.asarray(evaluation.theta).tolist(),
-        "theta_repaired": np.asarray(evaluation.theta_repaired).tolist(),
-        "metrics": {k: _number(v) for k, v in evaluation.metrics.items()},
-        "seed": evaluation.seed,
-        "seconds": round(evaluation.seconds, 6),
-        "message": evaluation.message,
-    }
-
-
-def _number(value: float) -> float | None:
-    value = float(value)
-    return value if math.isfinite(value) else None
-
-
 class Search:
     """A model-free QD search over a domain, writing into a run directory.
 
@@ -79,7 +53,7 @@ class Search:
 
     def __init__(self, *, domain: Domain, run: RunDirectory, state: dict) -> None:
         self.domain, self.run_dir, self.state = domain, run, state
-        self.records: dict[int, dict] = {r["index"]: r for r in run.evaluations()}
+        self.records: dict[int, EvaluationRecord] = {r.index: r for r in run.evaluations()}
         # One record per evaluation: the declared grids stacked (compile_spec admits only 32x32
         # ones); of size zero for a task without grids.
         self.occupancy_shape = (len(domain.grids), 32, 32)
@@ -130,9 +104,9 @@ class Search:
         # Keep only what the checkpoint knows of: the told evaluations and the pending batch's.
         pending = state["pending"]
         known = state["evaluations"] + (pending["count"] if pending else 0)
-        keep = [r for r in run.evaluations() if r["index"] < known]
+        keep = [r for r in run.evaluations() if r.index < known]
         run.truncate(len(keep), search.occupancy_shape)  # drops a torn line and its grids
-        search.records = {r["index"]: r for r in keep}
+        search.records = {r.index: r for r in keep}
         return search
 
     @property
@@ -170,7 +144,7 @@ class Search:
         done = [count - len(jobs)]  # of this batch, finished before (a resumed batch) or now
 
         def finished(job: Job, evaluation: Evaluation) -> None:
-            record = record_of(job, batch, evaluation)
+            record = EvaluationRecord.of(evaluation, index=job.index, batch=batch)
             self.run_dir.append(record, evaluation.occupancy, self.occupancy_shape)
             self.records[job.index] = record
             done[0] += 1
@@ -203,15 +177,15 @@ class Search:
             self.summarised = time.monotonic()
         progress(Snapshot(state["evaluations"], state["budget"], summary, len(failures)))
 
-    def _add_to_result(self, records: list[dict]) -> None:
+    def _add_to_result(self, records: list[EvaluationRecord]) -> None:
         """Adds the successful evaluations to the result archive with their raw objective."""
-        good = [r for r in records if r["status"] == "ok"]
+        good = [r for r in records if r.ok]
         if good:
             self.state["result"].add(
-                np.array([r["theta_repaired"] for r in good]),
-                np.array([r["objective"] for r in good]),
-                np.array([r["measures"] for r in good]),
-                evaluation=np.array([r["index"] for r in good]),
+                np.array([r.theta_repaired for r in good]),
+                np.array([r.objective for r in good]),
+                np.array([r.measures for r in good]),
+                evaluation=np.array([r.index for r in good]),
             )
 
     def dataset(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -222,43 +196,42 @@ class Search:
         so that training, and so the run, is the same whatever the number of workers.
         """
         lo, hi = self.domain.spec.objective.range
-        order = [r["index"] for r in self.run_dir.evaluations()]
+        order = [r.index for r in self.run_dir.evaluations()]
         grids = self.run_dir.occupancy(self.occupancy_shape)[: len(order)]
         rows = sorted(
-            ((i, self.records[index]) for i, index in enumerate(order) if self.records[index]["status"] == "ok"),
-            key=lambda row: row[1]["index"],
+            ((i, self.records[index]) for i, index in enumerate(order) if self.records[index].ok),
+            key=lambda row: row[1].index,
         )
-        theta = np.array([r["theta"] for _, r in rows], dtype=np.float32).reshape(len(rows), -1)
-        targets = np.array(
-            [[r["search_objective"] / (hi - lo), *r["measures"]] for _, r in rows], dtype=np.float32
-        ).reshape(len(rows), -1)
+        theta = np.array([r.theta for _, r in rows], dtype=np.float32).reshape(len(rows), -1)
+        targets = np.array([[r.search_objective / (hi - lo), *r.measures] for _, r in rows], dtype=np.float32).reshape(
+            len(rows), -1
+        )
         return theta, grids[[i for i, _ in rows]], targets
 
     def snapshot(self, extra: int = 0) -> Snapshot:
         return Snapshot(self.state["evaluations"] + extra, self.state["budget"], None, 0)
 
-    def failures(self) -> list[dict]:
+    def failures(self) -> list[EvaluationRecord]:
         """The result archive's elites that meet the failure condition, worst first."""
-        data = self.state["result"].data(["evaluation", "objective"])
-        found = [self.records[int(i)] for i in data["evaluation"] if self.records[int(i)]["failure"]]
-        return sorted(found, key=lambda r: -r["objective"])
+        return rank_failures(self.records[int(i)] for i in self.state["result"].data("evaluation"))
 
-    def write_summaries(self, failures: list[dict]) -> None:
+    def write_summaries(self, failures: list[EvaluationRecord]) -> None:
         names = [m.name for m in self.domain.measures]
         labels = self.domain.space.labels
         self.run_dir.write_csv("progress.csv", self.state["progress"])
         elites = sorted(
-            (self.records[int(i)] for i in self.state["result"].data("evaluation")), key=lambda r: -r["objective"]
+            (self.records[int(i)] for i in self.state["result"].data("evaluation")),
+            key=lambda r: (-r.objective, r.index),
         )
         self.run_dir.write_csv(
             "archive.csv",
             [
                 {
-                    "evaluation": r["index"],
-                    "objective": r["objective"],
-                    **dict(zip(names, r["measures"])),
-                    **dict(zip(labels, r["theta_repaired"])),
-                    "failure": r["failure"],
+                    "evaluation": r.index,
+                    "objective": r.objective,
+                    **dict(zip(names, r.measures)),
+                    **dict(zip(labels, r.theta_repaired)),
+                    "failure": r.failure,
                 }
                 for r in elites
             ],
@@ -271,13 +244,14 @@ class Search:
                     "failure": self.domain.spec.failure,
                     "failures": [
                         {
-                            "id": r["index"],
-                            "objective": r["objective"],
-                            "measures": dict(zip(names, r["measures"])),
-                            "theta": dict(zip(labels, r["theta_repaired"])),
-                            "theta_raw": r["theta"],
-                            "repair_cost": r["repair_cost"],
-                            "seed": r["seed"],
+                            "id": r.index,
+                            "objective": r.objective,
+                            "why": [str(c) for c in r.fired],
+                            "measures": dict(zip(names, r.measures)),
+                            "theta": dict(zip(labels, r.theta_repaired)),
+                            "theta_raw": list(r.theta),
+                            "repair_cost": r.repair_cost,
+                            "seed": r.seed,
                         }
                         for r in failures
                     ],

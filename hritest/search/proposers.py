@@ -8,12 +8,14 @@ into the checkpoint whole, so a resumed run continues with the exact same state.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from hritest.domain import Domain
+from hritest.records import EvaluationRecord
 from hritest.search import archives, inner
 
 if TYPE_CHECKING:
@@ -29,20 +31,20 @@ class ModelFree:
     def ask(self, search: Search) -> np.ndarray:
         return self.scheduler.ask()
 
-    def tell(self, search: Search, records: list[dict], solutions: np.ndarray) -> None:
+    def tell(self, search: Search, records: list[EvaluationRecord], solutions: np.ndarray) -> None:
         """Tells full batches (a budget-truncated last batch ends the run anyway)."""
         if len(records) != len(solutions):
             return
         domain = search.domain
         lo, hi = domain.spec.objective.range
         bad = lo - (hi - lo)  # below any threshold: ranked last, never an elite
-        ok = [r["status"] == "ok" and r["search_objective"] is not None for r in records]
-        objective = np.array([max(r["search_objective"], bad) if good else bad for r, good in zip(records, ok)])
+        ok = [r.ok and math.isfinite(r.search_objective) for r in records]
+        objective = np.array([max(r.search_objective, bad) if good else bad for r, good in zip(records, ok)])
         measures = np.array(
-            [r["measures"] if good else [m.range[0] for m in domain.measures] for r, good in zip(records, ok)],
+            [r.measures if good else [m.range[0] for m in domain.measures] for r, good in zip(records, ok)],
             dtype=float,
         ).reshape(len(records), -1)
-        regions = archives.region_measures(domain, [r["regions"] for r in records])
+        regions = archives.region_measures(domain, [r.regions for r in records])
         self.scheduler.tell(objective, np.hstack([measures, regions]))
 
 
@@ -118,13 +120,13 @@ class SurrogateAssisted:
         self.pending_predictions = self.surrogate.predict(proposals)
         return proposals
 
-    def tell(self, search: Search, records: list[dict], solutions: np.ndarray) -> None:
+    def tell(self, search: Search, records: list[EvaluationRecord], solutions: np.ndarray) -> None:
         if self.pending_predictions is None:
             return
         lo, hi = search.domain.spec.objective.range
         for record, predicted in zip(records, self.pending_predictions):
-            if record["status"] == "ok":
-                true = [record["search_objective"] / (hi - lo), *record["measures"]]
+            if record.ok:
+                true = [record.search_objective / (hi - lo), *record.measures]
                 self.held_out.append((self.outer, predicted.tolist(), true))
         search.run_dir.write_text("surrogate.json", json.dumps(self.accuracy(search.domain), indent=2))
 

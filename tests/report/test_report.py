@@ -15,7 +15,8 @@ from typer.testing import CliRunner
 
 from hritest import search as qd
 from hritest.cli import app
-from hritest.report import most_different, worst_failures, write_report
+from hritest.records import Clause, EvaluationRecord, Status
+from hritest.report import chosen_failures, most_different, worst_failures, write_report
 from hritest.rundir import RunDirectory
 
 FIXTURES = Path(__file__).parent.parent / "fixtures"
@@ -102,16 +103,37 @@ def test_report_lists_every_failure_and_links_recordings(run, reported):
     assert "each re-simulation reproduced its stored outcome" in page
 
 
+def failure(index: int, objective: float, measures: list[float], fired: tuple[str, ...] = ()) -> EvaluationRecord:
+    """A failure's record as a search writes it, with the clauses in ``fired`` held."""
+    return EvaluationRecord(
+        index=index, batch=1, status=Status.OK, failure=True, objective=objective, search_objective=objective,
+        measures=tuple(measures), repair_cost=0.0, regions={}, theta=(0.0,), theta_repaired=(0.0,), metrics={},
+        seed=index, seconds=0.0, clauses=tuple(Clause(text=c, holds=True) for c in fired),
+    )  # fmt: skip
+
+
 def test_most_different_takes_the_worst_failure_of_each_block():
     failures = [
-        {"index": 1, "objective": 9.0, "measures": [0.05, 0.01]},
-        {"index": 2, "objective": 9.5, "measures": [0.06, 0.02]},  # same block as 1, worse
-        {"index": 3, "objective": 8.0, "measures": [0.31, 0.08]},
-        {"index": 4, "objective": 8.5, "measures": [0.5, 0.2]},  # out of range: clipped to the last block
+        failure(1, 9.0, [0.05, 0.01]),
+        failure(2, 9.5, [0.06, 0.02]),  # same block as 1, worse
+        failure(3, 8.0, [0.31, 0.08]),
+        failure(4, 8.5, [0.5, 0.2]),  # out of range: clipped to the last block
     ]
     picked = most_different(failures, [(0.0, 0.32), (0.0, 0.087)])
-    assert [(block, r["index"]) for block, r in picked] == [("low / low", 2), ("high / high", 4)]
-    assert [r["index"] for r in worst_failures(failures, 3)] == [2, 1, 4]
+    assert [(block, r.index) for block, r in picked] == [("low / low", 2), ("high / high", 4)]
+    assert [r.index for r in worst_failures(failures, 3)] == [2, 1, 4]
+
+
+def test_ties_rank_by_index_and_every_clause_that_fired_is_chosen_for_recording():
+    failures = [
+        failure(7, 10.0, [0.1, 0.01], ("objective >= 10",)),
+        failure(3, 10.0, [0.1, 0.01], ("objective >= 10",)),
+        failure(5, 10.0, [0.1, 0.01], ("objective >= 10",)),
+        failure(9, 2.0, [0.1, 0.01], ("approach < 0.3",)),  # a safety failure, far from the worst objective
+    ]
+    assert [r.index for r in worst_failures(failures, 4)] == [3, 5, 7, 9]
+    chosen = chosen_failures(failures, [(0.0, 0.32), (0.0, 0.087)], 1)
+    assert [r.index for r in chosen] == [3, 9]
 
 
 def test_a_run_without_failures_says_so(calm_run):
@@ -197,3 +219,23 @@ def test_surrogate_accuracy_is_tabled_when_the_run_has_one(calm_run, tmp_path):
     for text in ("measure_mae.goal_distance", "0.123457", "196", "The same, per outer iteration", "0.987654"):
         assert text in page
     assert "occupancy_loss" not in page  # training losses stay in the file
+
+
+def test_a_two_clause_failure_condition_says_which_clause_held(tmp_path):
+    run = toy_run(tmp_path, failure="objective >= 9 or min_goal_distance < 0.03", budget=150, seed=3)
+    failures = failures_of(run)
+    why = [w for f in failures for w in f["why"]]
+    assert any(w.startswith("objective >= 9 (objective=") for w in why)
+    assert any(w.startswith("min_goal_distance < 0.03 (min_goal_distance=") for w in why)
+    for f in failures:  # each failure names at least one clause, with the value that decided it
+        assert f["why"], f
+
+    page = write_report(run, recordings=1).read_text()
+    assert "Why they fail" in page
+    assert "objective &gt;= 9" in page and "min_goal_distance &lt; 0.03" in page
+    # The worst failure of each clause is recorded, the safety clause's too.
+    worst_safety = min(
+        (f for f in failures if any(w.startswith("min_goal_distance") for w in f["why"])),
+        key=lambda f: (-f["objective"], f["id"]),
+    )["id"]
+    assert (run / "recordings" / f"{worst_safety}.rrd").is_file()

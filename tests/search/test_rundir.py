@@ -8,7 +8,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hritest.records import EvaluationRecord, Status
 from hritest.rundir import RunDirectory
+
+
+def record(index: int) -> EvaluationRecord:
+    return EvaluationRecord(
+        index=index, batch=1, status=Status.OK, failure=False, objective=1.0, search_objective=1.0, measures=(0.5,),
+        repair_cost=0.0, regions={}, theta=(0.0,), theta_repaired=(0.0,), metrics={}, seed=index, seconds=0.0,
+    )  # fmt: skip
 
 
 def new_run(tmp_path: Path) -> RunDirectory:
@@ -23,10 +31,10 @@ def test_evaluations_and_their_grids_append_read_and_truncate_together(tmp_path,
     shape = (channels, 32, 32)
     grids = np.random.default_rng(0).random((4, *shape), dtype=np.float32)
     for i, grid in enumerate(grids):
-        run.append({"index": i}, None if i == 2 else grid, shape)  # a failed evaluation has no grids
+        run.append(record(i), None if i == 2 else grid, shape)  # a failed evaluation has no grids
     expected = grids.copy()
     expected[2] = 0
-    assert [r["index"] for r in run.evaluations()] == [0, 1, 2, 3]
+    assert [r.index for r in run.evaluations()] == [0, 1, 2, 3]
     np.testing.assert_array_equal(run.occupancy(shape), expected)
     assert (run.path / "occupancy.f32").stat().st_size == grids.nbytes  # no bytes at all without grids
 
@@ -36,11 +44,11 @@ def test_evaluations_and_their_grids_append_read_and_truncate_together(tmp_path,
     assert run.occupancy(shape).shape == (4, *shape)
 
     run.truncate(2, shape)  # what resuming does
-    assert [r["index"] for r in run.evaluations()] == [0, 1]
+    assert [r.index for r in run.evaluations()] == [0, 1]
     np.testing.assert_array_equal(run.occupancy(shape), expected[:2])
 
-    run.append({"index": 2}, grids[3], shape)
-    assert [r["index"] for r in run.evaluations()] == [0, 1, 2]
+    run.append(record(2), grids[3], shape)
+    assert [r.index for r in run.evaluations()] == [0, 1, 2]
     np.testing.assert_array_equal(run.occupancy(shape), np.concatenate([expected[:2], grids[3:]]))
     run.truncate(0, shape)
     assert run.evaluations() == [] and run.occupancy(shape).shape == (0, *shape)
