@@ -174,37 +174,63 @@ def chosen_failures(
 
 @dataclass(frozen=True)
 class Recorded:
-    """A failure's recording: re-simulated now (``matches`` says whether the replay reproduced the
-    stored outcome), or ``matches`` None for one an earlier report or replay left behind."""
+    """A failure's recording and what its replay showed when it was made: ``matches`` says whether
+    the re-simulation reproduced the stored outcome (None: not known, a recording left behind by
+    ``hritest replay``); ``fresh`` whether it was made by this report rather than reused."""
 
     path: Path
     matches: bool | None
     differs: tuple[str, ...] = ()
+    fresh: bool = False
 
 
-def record_failures(data: RunData, failures: Sequence[Mapping[str, Any]]) -> dict[int, Recorded]:
-    """Re-simulates each failure (its stored raw theta and seed) into ``<run>/recordings/<id>.rrd``."""
+REPLAYS = "replays.json"  # in recordings/: each recording's scenario digest and replay verdict
+
+
+def record_failures(data: RunData, failures: Sequence[EvaluationRecord]) -> dict[int, Recorded]:
+    """Re-simulates each failure (its stored raw theta and seed) into ``<run>/recordings/<id>.rrd``,
+    unless a recording of that very scenario is there already (made by the search's own report, or
+    an earlier one): recordings are made once per scenario."""
     from hritest.recording import check_writable, write_recording
-    from hritest.replay import replay_record, run_domain
+    from hritest.replay import replay_record, run_domain, scenario_digest
 
     if not failures:
         return {}
     folder = data.path / "recordings"
-    check_writable(folder / f"{failures[0]['index']}.rrd")
-    domain = run_domain(RunDirectory.open(data.path))
-    done = {}
+    check_writable(folder / f"{failures[0].index}.rrd")
+    known = _replays(folder)
+    done, domain = {}, None
     for record in failures:
+        path = folder / f"{record.index}.rrd"
+        entry = known.get(str(record.index), {})
+        digest = scenario_digest(data.meta["spec_digest"], record.theta_repaired, record.seed)
+        if path.is_file() and entry.get("digest") == digest:
+            done[record.index] = Recorded(path, entry.get("matches"), tuple(entry.get("differs", ())))
+            continue
+        domain = domain or run_domain(RunDirectory.open(data.path))
         replay = replay_record(domain, record, spec_digest=data.meta["spec_digest"])
-        path = write_recording(
-            folder / f"{record['index']}.rrd",
+        write_recording(
+            path,
             domain=domain,
             evaluation=replay.evaluation,
             rollout=replay.rollout,
             recording_id=replay.digest,
-            title=f"{data.spec.name}: failure {record['index']} ({data.name})",
+            title=f"{data.spec.name}: failure {record.index} ({data.name})",
         )
-        done[record.index] = Recorded(path, replay.matches, tuple(c.name for c in replay.checks if not c.ok))
+        differs = tuple(c.name for c in replay.checks if not c.ok)
+        done[record.index] = Recorded(path, replay.matches, differs, fresh=True)
+        known[str(record.index)] = {"digest": digest, "matches": replay.matches, "differs": list(differs)}
+    atomic_write(folder / REPLAYS, json.dumps(known, indent=1))
     return done
+
+
+def _replays(folder: Path) -> dict[str, Any]:
+    """The recordings' index; an unreadable one only means re-simulating (it is rewritten)."""
+    try:
+        data = json.loads((folder / REPLAYS).read_text())
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
 
 
 # --- the report ------------------------------------------------------------------------------
@@ -228,7 +254,7 @@ def write_report(run_path: Path, *, recordings: int = RECORDINGS, out: Path | No
     out.mkdir(parents=True, exist_ok=True)
     recorded = record_failures(data, chosen_failures(data.failures, data.ranges, recordings))
     for r in data.failures:  # link what earlier reports or replays recorded
-        earlier = data.path / "recordings" / f"{r['index']}.rrd"
+        earlier = data.path / "recordings" / f"{r.index}.rrd"
         if r.index not in recorded and earlier.is_file():
             recorded[r.index] = Recorded(earlier, None)
     doc = run_document(data, recorded, link_base=out, worst_count=max(recordings, RECORDINGS))
@@ -522,21 +548,23 @@ def _clause_blocks(data: RunData, recorded: Mapping[int, Recorded], link_base: P
 
 
 def _replay_note(data: RunData, recorded: Mapping[int, Recorded]) -> str:
-    recorded = {i: r for i, r in recorded.items() if r.matches is not None}
-    if not recorded:
+    replayed = {i: r for i, r in recorded.items() if r.matches is not None}
+    if not replayed:
         return (
             "No failure was re-simulated for this report (--recordings 0); links go to recordings made "
             f"earlier, if any. Make one with 'hritest replay {data.path} --failure ID'."
         )
-    differ = sorted(i for i, r in recorded.items() if not r.matches)
+    differ = sorted(i for i, r in replayed.items() if not r.matches)
     verdict = (
         "each re-simulation reproduced its stored outcome (status, failure verdict, objective and measures within 1e-6)"
         if not differ
         else f"the re-simulations of failures {differ} did NOT reproduce their stored outcome"
     )
+    fresh = sum(r.fresh for r in replayed.values())
+    when = "now" if fresh == len(replayed) else f"{fresh} now, the others by an earlier report of this run"
     return (
-        f"{len(recorded)} failures were re-simulated from their stored raw theta and seed and recorded for "
-        f"Rerun under recordings/; {verdict}. Open one with 'rerun FILE.rrd', or "
+        f"{len(replayed)} failures were re-simulated from their stored raw theta and seed ({when}) and recorded "
+        f"for Rerun under recordings/; {verdict}. Open one with 'rerun FILE.rrd', or "
         f"'hritest replay {data.path} --failure ID --open'."
     )
 

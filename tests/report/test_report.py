@@ -239,3 +239,18 @@ def test_a_two_clause_failure_condition_says_which_clause_held(tmp_path):
         key=lambda f: (-f["objective"], f["id"]),
     )["id"]
     assert (run / "recordings" / f"{worst_safety}.rrd").is_file()
+
+
+def test_a_second_report_reuses_the_recordings_of_the_first(tmp_path):
+    run = toy_run(tmp_path, budget=100, seed=4)
+    write_report(run, recordings=2)
+    made = {p.name: p.stat().st_mtime_ns for p in (run / "recordings").glob("*.rrd")}
+    assert made
+    page = write_report(run, recordings=2).read_text()
+    assert {p.name: p.stat().st_mtime_ns for p in (run / "recordings").glob("*.rrd")} == made
+    assert "0 now, the others by an earlier report of this run" in page
+    # A recording whose scenario the index does not vouch for is made again.
+    (run / "recordings" / "replays.json").write_text("{not json")
+    page = write_report(run, recordings=2).read_text()
+    assert all(p.stat().st_mtime_ns != made[p.name] for p in (run / "recordings").glob("*.rrd"))
+    assert "were re-simulated from their stored raw theta and seed (now)" in page
