@@ -237,10 +237,11 @@ def simulate(
     json: JsonOption = False,
 ) -> None:
     """Simulate one scenario: status, objective, measures and every metric. Exit 1 if it is a failure."""
+    from hritest.evaluate import evaluate
     from hritest.records import clauses_text
 
     domain, values = _domain_and_theta(spec, theta)
-    evaluation = domain.evaluate(values, seed=seed)
+    evaluation = evaluate(domain, values, seed=seed)
     data = {
         "status": evaluation.status,
         "failure": evaluation.failure,

@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import pydantic
@@ -23,9 +23,6 @@ from hritest.scenario import Scenario, ScenarioSpace, Slot
 from hritest.sim.layout import START_CONFIG, ArmMount, BodyPose, Box, WorldLayout
 from hritest.spec import Spec, expr, source_of
 from hritest.spec.references import ARM_TARGET, check_references
-
-if TYPE_CHECKING:
-    from hritest.records import Evaluation
 
 REGION_COLOUR = (0.55, 0.75, 0.95, 0.6)
 OBJECT_COLOUR = (0.9, 0.5, 0.1, 1.0)
@@ -60,12 +57,6 @@ class Domain:
     nominal: np.ndarray = field(repr=False)
     world: WorldLayout | None = None
     folder: Path | None = None
-
-    def evaluate(self, theta: np.ndarray, *, seed: int = 0) -> Evaluation:
-        """Repair -> simulate -> metrics for one theta."""
-        from hritest.evaluate import evaluate
-
-        return evaluate(self, theta, seed=seed)
 
     def context(self, scenario: Scenario) -> TaskContext:
         """What the task gets for ``scenario``: never the spec."""

@@ -14,6 +14,7 @@ from typer.testing import CliRunner
 from hritest import search as qd
 from hritest.cli import app
 from hritest.domain import compile_spec
+from hritest.evaluate import evaluate
 from hritest.spec import load_spec
 
 DOCS = Path(__file__).parent.parent / "docs"
@@ -40,7 +41,7 @@ def test_the_guide_shows_the_example_files_as_they_are():
 def test_the_example_compiles_and_its_nominal_scenario_is_ok_and_repeatable():
     domain = compile_spec(load_spec(SPEC))
     assert domain.world is None and domain.grids == {}
-    first, again = domain.evaluate(domain.nominal, seed=3), domain.evaluate(domain.nominal, seed=3)
+    first, again = evaluate(domain, domain.nominal, seed=3), evaluate(domain, domain.nominal, seed=3)
     assert first.status == "ok", first.message
     assert not first.failure  # the nominal pedestrian waits and the robot arrives
     assert (first.objective, first.measures.tolist(), first.metrics) == (
@@ -90,7 +91,7 @@ def test_a_small_search_of_the_example_finds_failures_and_the_same_seed_repeats_
     ids=["impatient pedestrian: collision", "robot stops in the way: deadlock"],
 )
 def test_the_two_kinds_of_failure_the_guide_describes_happen(theta, collides):
-    evaluation = compile_spec(load_spec(SPEC)).evaluate(np.array(theta))
+    evaluation = evaluate(compile_spec(load_spec(SPEC)), np.array(theta))
     assert evaluation.failure and evaluation.objective == 20
     assert (evaluation.metrics["min_distance"] < 0.55) == collides
     assert (evaluation.metrics["time_stopped"] > 5) != collides  # a deadlock: both wait to the time limit

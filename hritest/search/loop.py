@@ -110,6 +110,11 @@ class Search:
         return search
 
     @property
+    def evaluated(self) -> int:
+        """Evaluations told so far."""
+        return self.state["evaluations"]
+
+    @property
     def done(self) -> bool:
         return self.state["evaluations"] >= self.state["budget"]
 

@@ -1,7 +1,8 @@
 """What proposes the next batch of scenarios to simulate: a pyribs scheduler, or SAS / DSAS.
 
 A proposer has ``ask(search) -> solutions`` and ``tell(search, records, solutions)``; the search
-loop evaluates what it asks and hands back the records in ask order. Both kinds are pickled
+loop evaluates what it asks and hands back the records in ask order. A proposer sees the search
+only through :class:`SearchView`, so the loop depends on proposers and never the reverse. Both kinds are pickled
 into the checkpoint whole, so a resumed run continues with the exact same state.
 """
 
@@ -10,16 +11,30 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
 from hritest.domain import Domain
 from hritest.records import EvaluationRecord
+from hritest.rundir import RunDirectory
 from hritest.search import archives, inner
 
-if TYPE_CHECKING:
-    from hritest.search.loop import Search
+
+class SearchView(Protocol):
+    """What a proposer reads of the search that drives it."""
+
+    domain: Domain
+    run_dir: RunDirectory
+
+    @property
+    def evaluated(self) -> int:
+        """Evaluations told so far."""
+        ...
+
+    def dataset(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Training data of every successful evaluation: raw theta, grids, targets."""
+        ...
 
 
 class ModelFree:
@@ -28,10 +43,10 @@ class ModelFree:
     def __init__(self, scheduler) -> None:  # noqa: ANN001 - ribs Scheduler
         self.scheduler = scheduler
 
-    def ask(self, search: Search) -> np.ndarray:
+    def ask(self, search: SearchView) -> np.ndarray:
         return self.scheduler.ask()
 
-    def tell(self, search: Search, records: list[EvaluationRecord], solutions: np.ndarray) -> None:
+    def tell(self, search: SearchView, records: list[EvaluationRecord], solutions: np.ndarray) -> None:
         """Tells full batches (a budget-truncated last batch ends the run anyway)."""
         if len(records) != len(solutions):
             return
@@ -89,9 +104,9 @@ class SurrogateAssisted:
         self.held_out: list[tuple[int, list[float], list[float]]] = []  # (outer iteration, predicted, true)
         self.fits: list[dict] = []
 
-    def ask(self, search: Search) -> np.ndarray:
+    def ask(self, search: SearchView) -> np.ndarray:
         space = search.domain.space
-        done = search.state["evaluations"]
+        done = search.evaluated
         self.pending_predictions = None
         if done < self.initial:
             return self.rng.uniform(space.lower, space.upper, size=(self.initial - done, space.dim))
@@ -120,7 +135,7 @@ class SurrogateAssisted:
         self.pending_predictions = self.surrogate.predict(proposals)
         return proposals
 
-    def tell(self, search: Search, records: list[EvaluationRecord], solutions: np.ndarray) -> None:
+    def tell(self, search: SearchView, records: list[EvaluationRecord], solutions: np.ndarray) -> None:
         if self.pending_predictions is None:
             return
         lo, hi = search.domain.spec.objective.range
