@@ -1,0 +1,102 @@
+"""Reading a run directory once, for a report: its records, progress, elites and failures."""
+
+from __future__ import annotations
+
+import csv
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from hritest.records import EvaluationRecord
+from hritest.rundir import RunDirectory
+
+
+@dataclass(frozen=True)
+class RunData:
+    """What a report needs from one run directory, read once."""
+
+    path: Path
+    meta: Mapping[str, Any]
+    spec: Any  # hritest.spec.Spec
+    records: Sequence[EvaluationRecord]
+    progress: Sequence[Mapping[str, float]]
+    elites: Sequence[EvaluationRecord]
+    failures: Sequence[EvaluationRecord]  # the reported failures, worst first
+    surrogate: Mapping[str, Any] | None
+
+    @property
+    def name(self) -> str:
+        return self.path.name
+
+    @property
+    def measure_names(self) -> list[str]:
+        return [m.name for m in self.spec.measures]
+
+    @property
+    def ranges(self) -> list[tuple[float, float]]:
+        return [tuple(m.range) for m in self.spec.measures]
+
+    @property
+    def labels(self) -> list[str]:
+        """Theta's component names, as ``hritest show`` lists them."""
+        labels = []
+        for p in self.spec.parameters:
+            labels += [p.name] if p.size == 1 else [f"{p.name}[{i}]" for i in range(p.size)]
+        return labels
+
+
+# --- reading ---------------------------------------------------------------------------------
+
+
+def load_run(path: Path) -> RunData:
+    """Reads a run directory.
+
+    Raises:
+        RunDirectoryError: not a run directory, or a corrupt one.
+        EmptyRunError: no finished evaluation yet.
+    """
+    from hritest.replay import EmptyRunError, failure_ids
+    from hritest.spec import load_spec
+
+    run = RunDirectory.open(path)
+    records = run.evaluations()
+    if not records:
+        raise EmptyRunError(
+            f"{run.path} has no evaluations yet; there is nothing to report. "
+            "Run 'hritest search --resume' on it, or start a new search"
+        )
+    spec = load_spec(run.path / "spec.yaml")
+    by_index = {r.index: r for r in records}
+    elite_ids = _elite_ids(run)
+    surrogate = run.path / "surrogate.json"
+    return RunData(
+        path=run.path,
+        meta=run.meta,
+        spec=spec,
+        records=records,
+        progress=_read_progress(run.path / "progress.csv"),
+        elites=[by_index[i] for i in elite_ids if i in by_index],
+        failures=[by_index[i] for i in failure_ids(run, records) if i in by_index],
+        surrogate=json.loads(surrogate.read_text()) if surrogate.is_file() else None,
+    )
+
+
+def _read_progress(path: Path) -> list[dict[str, float]]:
+    if not path.is_file():
+        return []
+    with open(path, newline="") as handle:
+        return [{k: float(v) for k, v in row.items() if v not in ("", None)} for row in csv.DictReader(handle)]
+
+
+def _elite_ids(run: RunDirectory) -> list[int]:
+    """The result archive's elites: ``archive.csv``, else the checkpoint's result archive."""
+    path = run.path / "archive.csv"
+    if path.is_file():
+        with open(path, newline="") as handle:
+            return [int(row["evaluation"]) for row in csv.DictReader(handle)]
+    state = run.load_checkpoint()
+    if state is None or "result" not in state:
+        return []
+    return [int(i) for i in state["result"].data("evaluation")]
