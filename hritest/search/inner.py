@@ -71,10 +71,24 @@ class SurrogateObjective:
         return torch.cat([measures, self.penalty.regions(x)], dim=1) if self.region_axes else measures
 
 
+STALL_GROWTH = 0.01  # the relative QD-score growth an inner loop must keep up to go on, with inner_stall
+
+
 def exploit(
-    domain: Domain, objective: SurrogateObjective, *, gradients: bool, iterations: int, seed: int
+    domain: Domain,
+    objective: SurrogateObjective,
+    *,
+    gradients: bool,
+    iterations: int,
+    seed: int,
+    stall: int | None = None,
 ) -> GridArchive:
-    """Runs the inner loop from scratch and returns its archive of surrogate elites."""
+    """Runs the inner loop from scratch and returns its archive of surrogate elites.
+
+    With ``stall``, it stops early once the archive's QD-score has not grown by
+    :data:`STALL_GROWTH` in ``stall`` iterations: an inner loop that has found what the
+    surrogate knows only costs time.
+    """
     keep_freed_memory()
     settings = domain.spec.search.emitter
     archive = archives.search_archive(domain, seed=seed)
@@ -116,12 +130,21 @@ def exploit(
         # all score below threshold_min; ribs then warns of an empty archive, which the emitters soon
         # leave. Not the user's concern.
         warnings.filterwarnings("ignore", message="`archive` was empty before adding solutions")
+        best, since = -np.inf, 0
         for _ in range(iterations):
             if gradients:
                 points = scheduler.ask_dqd()
                 scheduler.tell_dqd(*objective.with_jacobian(points))
             solutions = scheduler.ask()
             scheduler.tell(*objective(solutions))
+            if stall is not None:
+                score = archive.stats.qd_score
+                if score > best + STALL_GROWTH * abs(best) or not np.isfinite(best):
+                    best, since = score, 0
+                else:
+                    since += 1
+                    if since >= stall:
+                        break
     return archive
 
 

@@ -99,6 +99,9 @@ class SurrogateAssisted:
             device=pick_device(options.device),
             seed=seed,
         )
+        self.training = settings.training
+        self.stall = settings.inner_stall
+        self.trained = 0  # samples the surrogate had seen at its last fit
         self.outer = 0
         self.pending_predictions: np.ndarray | None = None
         self.held_out: list[tuple[int, list[float], list[float]]] = []  # (outer iteration, predicted, true)
@@ -111,7 +114,8 @@ class SurrogateAssisted:
         if done < self.initial:
             return self.rng.uniform(space.lower, space.upper, size=(self.initial - done, space.dim))
         theta, grids, targets = search.dataset()
-        fit = self.surrogate.fit(theta, grids, targets)
+        fit = self.surrogate.fit(theta, grids, targets, rows=self._rows(len(theta)))
+        self.trained = len(theta)
         self.outer += 1
         self.fits.append(
             {
@@ -127,6 +131,7 @@ class SurrogateAssisted:
             objective,
             gradients=self.gradients,
             iterations=self.iterations,
+            stall=self.stall,
             seed=int(self.rng.integers(2**31)),
         )
         proposals = inner.downsample(search.domain, archive, rng=self.rng)
@@ -134,6 +139,22 @@ class SurrogateAssisted:
             proposals = self.rng.uniform(space.lower, space.upper, size=(8, space.dim))
         self.pending_predictions = self.surrogate.predict(proposals)
         return proposals
+
+    def _rows(self, samples: int) -> np.ndarray | None:
+        """What this round trains on: everything (the paper), or, incrementally, the samples new
+        since the last round plus as many old ones drawn at random (at least a batch), so that
+        the networks learn the new data without forgetting the old and a round costs the same
+        however long the run."""
+        if self.training == "paper" or self.trained == 0:
+            return None
+        new = np.arange(self.trained, samples)
+        replay = min(self.trained, max(len(new), self.surrogate.batch_size))
+        old = np.random.default_rng([self.seed, self.outer]).choice(self.trained, size=replay, replace=False)
+        return np.concatenate([np.sort(old), new])
+
+    def __setstate__(self, state: dict) -> None:
+        # Checkpoints written before the incremental schedule existed trained the paper's way.
+        self.__dict__.update({"training": "paper", "stall": None, "trained": 0, **state})
 
     def tell(self, search: SearchView, records: list[EvaluationRecord], solutions: np.ndarray) -> None:
         if self.pending_predictions is None:

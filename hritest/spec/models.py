@@ -260,6 +260,17 @@ class SurrogateSettings(Strict):
     epochs: PositiveInt = 100
     batch_size: PositiveInt = 64
     learning_rate: PositiveFloat = 1e-4
+    training: Literal["paper", "incremental"] = Field(
+        "paper",
+        description="paper: each outer iteration trains `epochs` passes over every evaluation so far (its cost "
+        "grows with the run); incremental: the warm networks train on the new evaluations and as many replayed "
+        "old ones (a flat cost per iteration)",
+    )
+    inner_stall: PositiveInt | None = Field(
+        None,
+        description="stop an inner loop once its archive's QD-score has not grown by 1% in this many iterations "
+        "(default: always run inner_iterations, as the paper)",
+    )
 
 
 class SearchSpec(Strict):

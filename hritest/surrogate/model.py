@@ -103,11 +103,15 @@ class Surrogate:
         self.target_mean = torch.zeros(outputs, device=device)
         self.target_std = torch.ones(outputs, device=device)
 
-    def fit(self, theta: np.ndarray, occupancy: np.ndarray | None, targets: np.ndarray) -> Fit:
-        """One round of training on every sample so far (batches of ``batch_size``, last partial dropped).
+    def fit(
+        self, theta: np.ndarray, occupancy: np.ndarray | None, targets: np.ndarray, *, rows: np.ndarray | None = None
+    ) -> Fit:
+        """One round of training (batches of ``batch_size``, last partial dropped): on every sample,
+        or only on ``rows`` of them (the networks keep what earlier rounds taught them).
 
         ``occupancy`` is ``(samples, channels, 32, 32)``; without grids it is not read (None, or
-        the ``(samples, 0, 32, 32)`` array a run directory gives).
+        the ``(samples, 0, 32, 32)`` array a run directory gives). The targets are standardised
+        over every sample either way, so predictions keep one scale.
         """
         generator = torch.Generator().manual_seed(self.seed + 420 + self.rounds)
         self.rounds += 1
@@ -117,6 +121,10 @@ class Surrogate:
         std = y.std(dim=0) if len(y) > 1 else torch.ones_like(self.target_mean)
         self.target_std = torch.where(std > 1e-8, std, torch.ones_like(std))  # a constant target: any scale
         y = (y - self.target_mean) / self.target_std
+        if rows is not None:
+            index = torch.as_tensor(rows, dtype=torch.long, device=self.device)
+            x, y = x[index], y[index]
+            occupancy = None if occupancy is None or self.occupancy is None else np.asarray(occupancy)[rows]
         batch = min(self.batch_size, len(x))  # the paper's first round has 100 samples
 
         occupancy_loss, predicted = math.nan, None

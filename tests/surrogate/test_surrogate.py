@@ -239,3 +239,58 @@ def test_the_same_seed_gives_the_same_surrogate_run(tmp_path):
     assert (tmp_path / "a" / "archive.csv").read_text() == (tmp_path / "b" / "archive.csv").read_text()
     thetas = [[r["theta"] for r in RunDirectory.open(tmp_path / run).evaluations()] for run in ("a", "b")]
     assert sorted(thetas[0]) == sorted(thetas[1])  # the same proposals, finished in any order
+
+
+def test_a_fit_on_some_rows_trains_on_those_and_standardises_over_all(teleop_data):
+    domain, theta, grids, targets = teleop_data
+    model = surrogate_for(domain, epochs=2)
+    fit = model.fit(theta, grids, targets, rows=np.arange(32, 48))
+    assert fit.samples == 16
+    torch.testing.assert_close(model.target_mean, torch.as_tensor(targets).mean(dim=0))
+
+
+class Counting(SurrogateObjective):
+    """The surrogate objective, counting the inner loop's iterations (one call each)."""
+
+    calls = 0
+
+    def __call__(self, solutions):
+        self.calls += 1
+        return super().__call__(solutions)
+
+
+def test_an_inner_loop_stops_once_its_archive_stops_growing(teleop_data):
+    domain, theta, grids, targets = teleop_data
+    model = surrogate_for(domain)
+    model.fit(theta, grids, targets)
+    full, early = Counting(domain, model), Counting(domain, model)
+    exploit(domain, full, gradients=False, iterations=300, seed=1)
+    archive = exploit(domain, early, gradients=False, iterations=300, seed=1, stall=5)
+    assert full.calls == 300
+    assert 5 <= early.calls < 300 and archive.stats.num_elites > 0
+
+
+def test_incremental_training_sees_the_new_samples_and_as_many_old_ones(tmp_path):
+    text = (SPECS / "teleop.yaml").read_text()
+    old = "surrogate: {initial_evaluations: 100, inner_iterations: 10000, downsample_cells: [5, 20]}"
+    new = (
+        "surrogate: {initial_evaluations: 30, inner_iterations: 20, downsample_cells: [3, 5], epochs: 5,"
+        " training: incremental, inner_stall: 5}"
+    )
+    assert old in text
+    (tmp_path / "teleop.yaml").write_text(text.replace(old, new))
+    found = qd.start(
+        spec_file=tmp_path / "teleop.yaml",
+        out=tmp_path / "run",
+        algorithm="sas",
+        budget=70,
+        seed=0,
+        backend=qd.Backend(workers=2, timeout=60),
+        surrogate=qd.SurrogateOptions(device="cpu"),
+    )
+    proposer = found.state["proposer"]
+    assert len(proposer.fits) >= 2 and proposer.fits[0]["samples"] == 30  # the first round: every sample
+    # Later rounds: the samples new since the last round, and as many old ones (at least a batch).
+    rows = proposer._rows(proposer.trained + 10)
+    assert len(rows) == 10 + max(10, proposer.surrogate.batch_size) and len(set(rows.tolist())) == len(rows)
+    assert set(range(proposer.trained, proposer.trained + 10)) <= set(rows.tolist())
