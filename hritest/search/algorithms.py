@@ -36,9 +36,20 @@ class UniformEmitter(EmitterBase):
 
 
 def x0(domain: Domain) -> np.ndarray:
-    """The emitters' start: the spec's ``x0`` or the centre of the parameter bounds."""
+    """The emitters' start: the spec's ``x0``, else the nominal scenario, which lies inside the
+    bounds (the paper's ``x0 = 0`` lay outside them, so repair piled the first batches on edges)."""
     given = domain.spec.search.emitter.x0
-    return np.array(given, dtype=float) if given is not None else (domain.space.lower + domain.space.upper) / 2
+    return np.array(given, dtype=float) if given is not None else np.asarray(domain.nominal, dtype=float)
+
+
+def sigma0(domain: Domain) -> float:
+    """The emitters' step: the spec's ``sigma0``, else a sixth of the bounds' typical width (their
+    geometric mean), so that a first batch spreads over the space whatever its units."""
+    given = domain.spec.search.emitter.sigma0
+    if given is not None:
+        return given
+    widths = domain.space.upper - domain.space.lower
+    return float(np.exp(np.mean(np.log(widths[widths > 0])))) / 6 if np.any(widths > 0) else 1.0
 
 
 def scheduler(domain: Domain, algorithm: str, archive, *, seed: int) -> Scheduler:  # noqa: ANN001
@@ -59,7 +70,13 @@ def scheduler(domain: Domain, algorithm: str, archive, *, seed: int) -> Schedule
         settings = search.map_elites
         start = np.array(settings.x0, dtype=float) if settings.x0 is not None else x0(domain)
         emitters = [
-            GaussianEmitter(archive, sigma=settings.sigma, x0=start, batch_size=settings.batch_size, seed=int(seeds[0]))
+            GaussianEmitter(
+                archive,
+                sigma=settings.sigma if settings.sigma is not None else sigma0(domain),
+                x0=start,
+                batch_size=settings.batch_size,
+                seed=int(seeds[0]),
+            )
         ]
     elif algorithm == "cma_mae":
         settings = search.emitter
@@ -67,7 +84,7 @@ def scheduler(domain: Domain, algorithm: str, archive, *, seed: int) -> Schedule
             EvolutionStrategyEmitter(
                 archive,
                 x0=x0(domain),
-                sigma0=settings.sigma0,
+                sigma0=sigma0(domain),
                 ranker="imp",
                 selection_rule="mu",
                 restart_rule="basic",

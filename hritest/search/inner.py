@@ -99,7 +99,7 @@ def exploit(
             GradientArborescenceEmitter(
                 archive,
                 x0=start,
-                sigma0=settings.sigma0,
+                sigma0=algorithms.sigma0(domain),
                 lr=settings.gradient_lr,
                 ranker="imp",
                 grad_opt="gradient_ascent",
@@ -115,7 +115,7 @@ def exploit(
             EvolutionStrategyEmitter(
                 archive,
                 x0=start,
-                sigma0=settings.sigma0,
+                sigma0=algorithms.sigma0(domain),
                 ranker="imp",
                 selection_rule="mu",
                 restart_rule="basic",

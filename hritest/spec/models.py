@@ -232,8 +232,10 @@ class EmitterSettings(Strict):
 
     emitters: PositiveInt = 8
     batch_size: PositiveInt = 37
-    sigma0: PositiveFloat = 0.01
-    x0: list[float] | None = Field(None, description="default: the centre of the parameter bounds")
+    sigma0: PositiveFloat | None = Field(
+        None, description="CMA-ES step in theta's units; default: a sixth of the bounds' typical width"
+    )
+    x0: list[float] | None = Field(None, description="default: the nominal scenario (inside the bounds)")
     learning_rate: float = Field(0.1, gt=0, le=1, description="archive learning rate alpha")
     threshold_min: float = 0.0
     gradient_lr: PositiveFloat = Field(1.0, description="DSAS gradient-ascent step")
@@ -241,7 +243,7 @@ class EmitterSettings(Strict):
 
 class MapElitesSettings(Strict):
     batch_size: PositiveInt = 20
-    sigma: PositiveFloat | list[PositiveFloat] = 0.01
+    sigma: PositiveFloat | list[PositiveFloat] | None = Field(None, description="default: emitter.sigma0")
     x0: list[float] | None = Field(None, description="where the first batch is sampled around; default: emitter.x0")
 
 
