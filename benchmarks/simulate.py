@@ -41,9 +41,9 @@ from hritest.spec import load_spec  # noqa: E402
 
 SPECS = Path(__file__).resolve().parent.parent / "specs"
 DEFAULT_N = {"teleop": 1000, "collab": 200}
-# Which functions enter each part, by (file suffix, function name or None for all).
+# Which functions enter each part, by (file suffix or folder ending in "/", function name or None for all).
 PARTS = {
-    "repair": (("hritest/repair.py", None), ("hritest/constraints.py", None)),
+    "repair": (("hritest/repair/", None), ("hritest/constraints.py", None)),
     "world / MuJoCo": (("hritest/sim/world.py", None), ("hritest/sim/control.py", None)),
     "robot policy": (("plugins/robots.py", "act"),),
     "human policy": (("plugins/humans.py", "act"),),
@@ -82,9 +82,12 @@ def run(domain: Domain, points: np.ndarray) -> dict:
 
 
 def _is(func: tuple[str, int, str], suffix: str, name: str | None = None) -> bool:
-    """Whether a cProfile function key is in a file ending with ``suffix`` (and is ``name``)."""
+    """Whether a cProfile function key is in a file ending with ``suffix``, or in a folder when it
+    ends with ``/`` (and is ``name``)."""
     filename, _, function = func
-    return filename.replace(os.sep, "/").endswith(suffix) and name in (None, function)
+    path = filename.replace(os.sep, "/")
+    where = f"/{suffix}" in path if suffix.endswith("/") else path.endswith(suffix)
+    return where and name in (None, function)
 
 
 def _part_of(func: tuple[str, int, str]) -> str | None:

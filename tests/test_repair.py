@@ -10,6 +10,7 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 import hritest.repair as repair_module
+import hritest.repair.solve as solve_module
 from hritest.repair import (
     InfeasibleConstraints,
     Region,
@@ -386,7 +387,7 @@ def test_solver_failure_is_a_status(monkeypatch):
         def solve(self, model):
             raise RuntimeError("solver crashed")
 
-    monkeypatch.setattr(repair_module, "_solver", lambda *args: Broken())
+    monkeypatch.setattr(solve_module, "_solver", lambda *args: Broken())
     result = repair(PAPER, np.tile([0.6, 0.05], (3, 1)))
     assert result.status == "error" and "solver crashed" in result.message
 
