@@ -527,6 +527,44 @@ def replay(
         raise typer.Exit(EXIT_FINDING)
 
 
+@command
+def shrink(
+    run: Annotated[Path, typer.Argument(help="the run directory", show_default=False)],
+    failure: Annotated[
+        int, typer.Option(help="the failure's id (see the report or failures.yaml)", show_default=False)
+    ],
+    budget: Annotated[int, typer.Option(min=1, help="the most simulations to spend")] = 100,
+    clause: Annotated[
+        str | None,
+        typer.Option(help="the failure clause to keep (default: the first that holds)", show_default=False),
+    ] = None,
+    json: JsonOption = False,
+) -> None:
+    """Shrink a failure: move its parameters toward nominal while the same failure clause holds.
+
+    Prints which parameters still matter, and stores the shrunk scenario in RUN/shrunk/ID.json.
+    """
+    from hritest.shrink import shrink_failure
+
+    result, path = shrink_failure(run, failure, clause=clause, budget=budget)
+    if json:
+        _print_json({"failure": failure, **result.to_json()})
+        return
+    table = Table(title=f"failure {failure}, shrunk: '{result.clause}' still holds", title_justify="left")
+    for column in ("parameter", "original", "shrunk", "nominal", ""):
+        table.add_column(column, justify="left" if column in ("parameter", "") else "right")
+    for name, row in result.to_json()["parameters"].items():
+        values = [", ".join(f"{v:.4g}" for v in row[k]) for k in ("original", "shrunk", "nominal")]
+        table.add_row(name, *values, "[bold]still matters[/bold]" if row["matters"] else "nominal")
+    out.print(table)
+    out.print(
+        f"{len(result.off_nominal(result.original))} -> {len(result.off_nominal(result.theta))} parameters away "
+        f"from nominal, in {result.evaluations} simulations; objective {result.evaluation.objective:.4g}",
+        highlight=False,
+    )
+    out.print(f"saved: {path}", highlight=False)
+
+
 def _print_replay(result) -> None:  # noqa: ANN001 - hritest.replay.Replay
     table = Table(title=f"replay against {result.against}", title_justify="left")
     for column in ("compared", result.reference, "replayed", ""):

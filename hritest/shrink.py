@@ -19,20 +19,26 @@ Every pass stops when the simulation budget is spent.
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from hritest.domain import Domain
+from hritest.errors import HritestError
 from hritest.evaluate import evaluate
 from hritest.records import Evaluation
+from hritest.replay import run_domain, stored_failure
+from hritest.rundir import RunDirectory, atomic_write
 
 BUDGET = 100  # simulations a shrink may spend, by default
 BISECTIONS = 4  # halvings of each remaining parameter's distance to nominal
 SAME = 1e-9  # a component this close to nominal is nominal
 
 
-class ShrinkError(ValueError):
+class ShrinkError(HritestError):
     """A scenario that cannot be shrunk: it does not fail, or not with the clause asked for."""
 
 
@@ -52,6 +58,28 @@ class Shrunk:
     def off_nominal(self, theta: np.ndarray) -> list[str]:
         """The parameters of ``theta`` (the original or the shrunk one) not at their nominal value."""
         return [name for name, part in self.parameters.items() if not _at(theta[part], self.nominal[part])]
+
+    def to_json(self) -> dict[str, Any]:
+        """What ``hritest shrink --json`` prints and ``<run>/shrunk/<id>.json`` holds."""
+        matters = set(self.off_nominal(self.theta))
+        return {
+            "clause": self.clause,
+            "theta": self.theta.tolist(),
+            "original_theta": self.original.tolist(),
+            "nominal_theta": self.nominal.tolist(),
+            "evaluations": self.evaluations,
+            "objective": self.evaluation.objective,
+            "parameters": {
+                name: {
+                    "original": self.original[part].tolist(),
+                    "shrunk": self.theta[part].tolist(),
+                    "nominal": self.nominal[part].tolist(),
+                    "matters": name in matters,
+                }
+                for name, part in self.parameters.items()
+            },
+            "steps": list(self.steps),
+        }
 
 
 def shrink(domain: Domain, theta: np.ndarray, *, seed: int, clause: str | None = None, budget: int = BUDGET) -> Shrunk:
@@ -93,6 +121,24 @@ def shrink(domain: Domain, theta: np.ndarray, *, seed: int, clause: str | None =
         evaluations=state.used,
         steps=tuple(state.steps),
     )
+
+
+def shrink_failure(
+    run_path: Path, failure_id: int, *, clause: str | None = None, budget: int = BUDGET
+) -> tuple[Shrunk, Path]:
+    """Shrinks failure ``failure_id`` of a run (its stored raw theta and seed) and stores the
+    result in ``<run>/shrunk/<id>.json``, which ``hritest promote --shrink`` reads.
+
+    Raises:
+        RunDirectoryError, EmptyRunError, UnknownFailureError, SpecError, ShrinkError: bad input.
+    """
+    run = RunDirectory.open(run_path)
+    record = stored_failure(run, failure_id)
+    result = shrink(run_domain(run), np.asarray(record.theta), seed=record.seed, clause=clause, budget=budget)
+    path = run.path / "shrunk" / f"{failure_id}.json"
+    path.parent.mkdir(exist_ok=True)
+    atomic_write(path, json.dumps({"failure": failure_id, "seed": record.seed, **result.to_json()}, indent=1))
+    return result, path
 
 
 def _bisect(state: _State, nominal: np.ndarray, part: slice, name: str) -> None:
@@ -159,4 +205,4 @@ class _State:
         return False
 
 
-__all__ = ["BUDGET", "ShrinkError", "Shrunk", "shrink"]
+__all__ = ["BUDGET", "ShrinkError", "Shrunk", "shrink", "shrink_failure"]

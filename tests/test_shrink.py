@@ -3,9 +3,15 @@ parameter away from nominal, spends at most its budget, and says what still matt
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
+import yaml
+from typer.testing import CliRunner
 
+from hritest import search as qd
+from hritest.cli import app
 from hritest.domain import compile_spec
 from hritest.evaluate import evaluate
 from hritest.shrink import ShrinkError, shrink
@@ -80,3 +86,20 @@ def test_a_passing_scenario_or_a_clause_that_does_not_hold_is_refused(domain):
     [theta] = failures(domain, "objective >= 8", 1)  # goals within 0.1 m: the other clause cannot hold
     with pytest.raises(ShrinkError, match="does not hold"):
         shrink(domain, theta, seed=0, clause="min_goal_distance > 0.25")
+
+
+def test_the_command_prints_what_still_matters_and_stores_the_shrunk_scenario(domain, tmp_path):
+    spec = tmp_path / "spec.yaml"  # the domain fixture's spec
+    qd.start(
+        spec_file=spec, out=tmp_path / "run", algorithm="random", budget=100, seed=0, backend=qd.Backend(workers=1)
+    )
+    failure = yaml.safe_load((tmp_path / "run" / "failures.yaml").read_text())["failures"][0]
+    result = CliRunner().invoke(app, ["shrink", str(tmp_path / "run"), "--failure", str(failure["id"]), "--json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output)
+    assert data["original_theta"] == failure["theta_raw"] and len(data["theta"]) == len(data["original_theta"])
+    assert data["clause"] in {"objective >= 8", "min_goal_distance > 0.25"} and 1 <= data["evaluations"] <= 100
+    assert json.loads((tmp_path / "run" / "shrunk" / f"{failure['id']}.json").read_text())["theta"] == data["theta"]
+
+    result = CliRunner().invoke(app, ["shrink", str(tmp_path / "run"), "--failure", "99999"])
+    assert result.exit_code == 2 and "99999" in result.output
