@@ -44,7 +44,7 @@ DEFAULT_N = {"teleop": 1000, "collab": 200}
 # Which functions enter each part, by (file suffix or folder ending in "/", function name or None for all).
 PARTS = {
     "repair": (("hritest/repair/", None), ("hritest/constraints.py", None)),
-    "world / MuJoCo": (("hritest/sim/world.py", None), ("hritest/sim/control.py", None)),
+    "world / MuJoCo": (("hritest/sim/world.py", None), ("hritest/sim/mjcf.py", None), ("hritest/sim/control.py", None)),
     "robot policy": (("plugins/robots.py", "act"),),
     "human policy": (("plugins/humans.py", "act"),),
     "metrics": (("hritest/metrics.py", None), ("hritest/evaluate.py", "_score")),

@@ -14,34 +14,15 @@ from hritest.sim.layout import ROBOT_BASE, START_CONFIG, ArmMount, BodyPose, Box
 
 if TYPE_CHECKING:
     from hritest.sim.control import twist_to_joint_velocity
-    from hritest.sim.world import (
-        DT,
-        HAND_RADIUS,
-        ArmModelError,
-        Geom,
-        SceneReplay,
-        TwistStep,
-        World,
-        WorldModelError,
-        shared_world,
-    )
+    from hritest.sim.mjcf import HAND_RADIUS, ArmModelError, WorldModelError
+    from hritest.sim.scene_replay import Geom, SceneReplay
+    from hritest.sim.world import DT, TwistStep, World, shared_world
 
 _LAZY = {
     "twist_to_joint_velocity": "hritest.sim.control",
-    **dict.fromkeys(
-        (
-            "DT",
-            "HAND_RADIUS",
-            "ArmModelError",
-            "Geom",
-            "SceneReplay",
-            "TwistStep",
-            "World",
-            "WorldModelError",
-            "shared_world",
-        ),
-        "hritest.sim.world",
-    ),
+    **dict.fromkeys(("HAND_RADIUS", "ArmModelError", "WorldModelError"), "hritest.sim.mjcf"),
+    **dict.fromkeys(("Geom", "SceneReplay"), "hritest.sim.scene_replay"),
+    **dict.fromkeys(("DT", "TwistStep", "World", "shared_world"), "hritest.sim.world"),
 }
 
 

@@ -24,6 +24,7 @@ origin), so :meth:`hritest.sim.World.link_poses` gives frames a viewer can draw 
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 # Kinova Mico DH parameters (metres).
 D1, D2, D3, D4, D5, D6, E2 = 0.2755, 0.29, 0.1233, 0.0741, 0.0741, 0.16, 0.007
@@ -70,7 +71,7 @@ def _slide(z: float) -> np.ndarray:
     return out
 
 
-def _fmt(values) -> str:
+def _fmt(values: ArrayLike) -> str:
     return " ".join(f"{v:.6g}" if abs(v) > 1e-12 else "0" for v in np.ravel(values))
 
 

@@ -28,7 +28,7 @@ class Box:
     half_size: tuple[float, float, float]
     rgba: tuple[float, float, float, float] = (0.6, 0.6, 0.6, 1.0)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name, size in (("center", 3), ("half_size", 3), ("rgba", 4)):
             value = tuple(float(v) for v in getattr(self, name))
             if len(value) != size:
