@@ -21,7 +21,7 @@ from dataclasses import dataclass, field, replace
 from typing import ClassVar
 
 import numpy as np
-from hritest_plugins import hindsight, scene
+from hritest_plugins import poses, scene
 from pydantic import BaseModel, ConfigDict, Field
 
 from hritest import metrics
@@ -112,13 +112,13 @@ class CollaborationTask:
         targets = scene.goal_targets(self.scenario, self.names)
         goals = np.array([self.scenario.objects[n] for n in self.names], dtype=float)
         # Per goal, computed once: the robot's at-goal check and the human's other boxes.
-        robot_checks = [hindsight.prepare_targets(goal_targets) for goal_targets in targets]
+        robot_checks = [poses.prepare_targets(goal_targets) for goal_targets in targets]
         others = [np.delete(goals, goal, axis=0) for goal in range(len(goals))]
         start_q = world.q
         home = start_q.copy()
         hand = self.start.copy()
         hand_pose = np.eye(4)
-        hand_pose[:3, :3] = hindsight.GOAL_ROTATION
+        hand_pose[:3, :3] = poses.GOAL_ROTATION
         h, r = _Agent("moving"), _Agent("moving")
         blocked: dict[int, str] = {}
         record = _Record(world.tracer())

@@ -1,9 +1,10 @@
 """Robot policies: hindsight-optimisation assistance, policy blending, and the collaboration robot.
 
-Each class wraps the math of :mod:`hritest_plugins.hindsight` with the per-episode state (the
-belief) and reads only the observation its task gives it.
+Each class wraps the math of :mod:`hritest_plugins.hindsight` (and of :mod:`~hritest_plugins.huber`,
+:mod:`~hritest_plugins.blending`) with the per-episode state (the belief) and reads only the
+observation its task gives it.
 
-The goal targets arrive every tick; the robots prepare them (:func:`hindsight.prepare_targets`)
+The goal targets arrive every tick; the robots prepare them (:func:`poses.prepare_targets`)
 once per array a task hands them. Tasks build that array once per episode, read-only.
 """
 
@@ -12,7 +13,7 @@ from __future__ import annotations
 from typing import Any, ClassVar, Literal
 
 import numpy as np
-from hritest_plugins import hindsight
+from hritest_plugins import blending, hindsight, huber, poses
 from hritest_plugins.actions import RobotAction
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -70,7 +71,7 @@ class BlendRobot(HindsightRobot):
     Params = _BlendParams
 
     def combine(self, belief: np.ndarray, actions: np.ndarray, user: np.ndarray) -> np.ndarray:
-        return hindsight.blend_twist(belief, actions, user, threshold=self.params.threshold, mode=self.params.mode)
+        return blending.blend_twist(belief, actions, user, threshold=self.params.threshold, mode=self.params.mode)
 
 
 class _CollabParams(_Params):
@@ -129,20 +130,20 @@ class CollabRobot:
         return RobotAction(twist=twist, belief=belief, goal=mapping[int(belief.argmax())])
 
 
-def _hand_values(targets: hindsight.Targets, hand_pose: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _hand_values(targets: poses.Targets, hand_pose: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Goal-level V and Q of the hand's motion, for the belief update."""
-    values, q_values, _ = hindsight.lookahead(hand_pose, twist, targets).per_goal()
+    values, q_values, _ = huber.lookahead(hand_pose, twist, targets).per_goal()
     return values, q_values
 
 
-def _plan(targets: hindsight.Targets, ee_pose: np.ndarray, visited: tuple[int, ...]) -> tuple[list, np.ndarray]:
+def _plan(targets: poses.Targets, ee_pose: np.ndarray, visited: tuple[int, ...]) -> tuple[list, np.ndarray]:
     """The feasible-goal mapping from the robot's values and, per candidate human goal, the
     action toward the goal mapped to it (:func:`hindsight.mapped_actions`)."""
     per = targets.shape[-1]
-    towards = hindsight.offsets(ee_pose, targets)
-    values = hindsight.huber_values(towards)
+    towards = poses.offsets(ee_pose, targets)
+    values = huber.huber_values(towards)
     mapping = hindsight.feasible_goal_mapping(values.reshape(-1, per).min(axis=1), visited)
-    return mapping.tolist(), hindsight.mapped_actions(hindsight.goal_actions(towards, values, per), mapping)
+    return mapping.tolist(), hindsight.mapped_actions(huber.goal_actions(towards, values, per), mapping)
 
 
 class _LastResult:
@@ -155,11 +156,11 @@ class _LastResult:
 
     def __init__(self, compute: Any) -> None:
         self.compute = compute
-        self.targets: hindsight.Targets | None = None
+        self.targets: poses.Targets | None = None
         self.key: tuple = ()
         self.result: Any = None
 
-    def __call__(self, targets: hindsight.Targets, *args: Any) -> Any:
+    def __call__(self, targets: poses.Targets, *args: Any) -> Any:
         key = tuple(arg.tobytes() if isinstance(arg, np.ndarray) else arg for arg in args)
         if targets is not self.targets or key != self.key:
             self.targets, self.key, self.result = targets, key, self.compute(targets, *args)
@@ -167,13 +168,13 @@ class _LastResult:
 
 
 class _PreparedTargets:
-    """The :class:`hindsight.Targets` of the last goal-target array seen, prepared once."""
+    """The :class:`poses.Targets` of the last goal-target array seen, prepared once."""
 
     def __init__(self) -> None:
         self.source: np.ndarray | None = None
-        self.prepared: hindsight.Targets | None = None
+        self.prepared: poses.Targets | None = None
 
-    def of(self, targets: np.ndarray) -> hindsight.Targets:
+    def of(self, targets: np.ndarray) -> poses.Targets:
         if targets is not self.source:
-            self.source, self.prepared = targets, hindsight.prepare_targets(targets)
+            self.source, self.prepared = targets, poses.prepare_targets(targets)
         return self.prepared

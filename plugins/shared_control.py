@@ -12,7 +12,7 @@ import math
 from typing import ClassVar
 
 import numpy as np
-from hritest_plugins import hindsight, scene
+from hritest_plugins import poses, scene
 from pydantic import BaseModel, ConfigDict, Field
 
 from hritest import metrics
@@ -63,7 +63,7 @@ class SharedControlTask:
         tracer = world.tracer()
         targets = scene.goal_targets(self.scenario, self.goal_names)
         true = self.goal_names.index(p.true_goal)
-        true_targets = hindsight.prepare_targets(targets[true])
+        true_targets = poses.prepare_targets(targets[true])
         goal_position = self.scenario.objects[p.true_goal]
         ee, beliefs, events = [], [], []
         reached = False

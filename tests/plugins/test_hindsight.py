@@ -4,17 +4,17 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hritest_plugins import hindsight as h
+from hritest_plugins import blending, hindsight, huber, poses
 from hritest_plugins import teleop_human as th
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-C = h.DEFAULT_CONSTANTS
+C = huber.DEFAULT_CONSTANTS
 Z = 0.96  # goal height
 
 
-def pose_at(xyz, rotation=h.GOAL_ROTATION) -> np.ndarray:
+def pose_at(xyz, rotation=poses.GOAL_ROTATION) -> np.ndarray:
     pose = np.eye(4)
     pose[:3, :3] = rotation
     pose[:3, 3] = xyz
@@ -24,7 +24,7 @@ def pose_at(xyz, rotation=h.GOAL_ROTATION) -> np.ndarray:
 def value_at_distance(d: float) -> float:
     """V of a target straight ahead (+x) at distance d, orientation matched (V_r = 0)."""
     target = pose_at([0.6, 0.0, Z])
-    return float(h.target_value(pose_at([0.6 - d, 0.0, Z]), target))
+    return float(huber.target_value(pose_at([0.6 - d, 0.0, Z]), target))
 
 
 # --- Huber value --------------------------------------------------------------------------
@@ -48,9 +48,9 @@ def test_value_is_continuous_and_differentiable_at_delta():
 
 
 def test_rotation_value_is_zero_only_for_the_matching_target():
-    targets = h.target_poses([0.6, 0.0, Z])
+    targets = poses.target_poses([0.6, 0.0, Z])
     pose = pose_at([0.6, 0.0, Z])
-    v_same, v_flipped = h.target_value(pose, targets)
+    v_same, v_flipped = huber.target_value(pose, targets)
     assert v_same == pytest.approx(0.0, abs=1e-12)
     a, delta, c = C.rotation_linear, C.rotation_delta, C.rotation_constant
     assert v_flipped == pytest.approx(C.rotation_multiplier * ((a + c) * np.pi - a * delta / 2))
@@ -59,13 +59,13 @@ def test_rotation_value_is_zero_only_for_the_matching_target():
 def test_q_value_is_step_cost_plus_value_after_the_action():
     target = pose_at([0.6, 0.0, Z])
     pose = pose_at([0.3, 0.0, Z])  # 0.3 m away: linear regime, slope 2.45
-    v = h.target_value(pose, target)
+    v = huber.target_value(pose, target)
     rotation_cost = C.action_apply_time * C.rotation_multiplier * C.rotation_constant
-    q_still = h.target_q_value(pose, np.zeros(6), target)
+    q_still = huber.target_q_value(pose, np.zeros(6), target)
     assert q_still - v == pytest.approx(C.action_apply_time * 2.45 + rotation_cost)
-    q_toward = h.target_q_value(pose, [0.05, 0, 0, 0, 0, 0], target)
+    q_toward = huber.target_q_value(pose, [0.05, 0, 0, 0, 0, 0], target)
     assert q_toward - v == pytest.approx(C.action_apply_time * 2.45 * (1 - 0.05) + rotation_cost)
-    assert h.target_q_value(pose, [-0.05, 0, 0, 0, 0, 0], target) > q_still > q_toward
+    assert huber.target_q_value(pose, [-0.05, 0, 0, 0, 0, 0], target) > q_still > q_toward
 
 
 # --- apply_twist --------------------------------------------------------------------------
@@ -73,27 +73,27 @@ def test_q_value_is_step_cost_plus_value_after_the_action():
 
 def test_zero_twist_is_identity():
     pose = pose_at([0.3, -0.2, 0.9])
-    np.testing.assert_allclose(h.apply_twist(pose, np.zeros(6), 0.1), pose, atol=1e-15)
+    np.testing.assert_allclose(poses.apply_twist(pose, np.zeros(6), 0.1), pose, atol=1e-15)
 
 
 def test_pure_translation_moves_by_velocity_times_duration():
     pose = pose_at([0.3, -0.2, 0.9])
-    moved = h.apply_twist(pose, [0.1, -0.2, 0.05, 0, 0, 0], 0.5)
+    moved = poses.apply_twist(pose, [0.1, -0.2, 0.05, 0, 0, 0], 0.5)
     np.testing.assert_allclose(moved[:3, 3], [0.35, -0.3, 0.925])
     np.testing.assert_allclose(moved[:3, :3], pose[:3, :3])
 
 
 def test_rotation_is_world_frame_and_composes():
     pose = pose_at([0.3, -0.2, 0.9])
-    quarter = h.apply_twist(pose, [0, 0, 0, 0, 0, np.pi / 2], 1.0)
+    quarter = poses.apply_twist(pose, [0, 0, 0, 0, 0, np.pi / 2], 1.0)
     rz90 = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
-    np.testing.assert_allclose(quarter[:3, :3], rz90 @ h.GOAL_ROTATION, atol=1e-12)
-    twice = h.apply_twist(h.apply_twist(pose, [0, 0, 0, 0.3, 0, 0], 0.5), [0, 0, 0, 0.3, 0, 0], 0.5)
-    once = h.apply_twist(pose, [0, 0, 0, 0.3, 0, 0], 1.0)
+    np.testing.assert_allclose(quarter[:3, :3], rz90 @ poses.GOAL_ROTATION, atol=1e-12)
+    twice = poses.apply_twist(poses.apply_twist(pose, [0, 0, 0, 0.3, 0, 0], 0.5), [0, 0, 0, 0.3, 0, 0], 0.5)
+    once = poses.apply_twist(pose, [0, 0, 0, 0.3, 0, 0], 1.0)
     np.testing.assert_allclose(twice, once, atol=1e-12)
     # the pose after yawing by pi is exactly the goal's second target
-    flipped = h.apply_twist(pose_at([0.6, 0, Z]), [0, 0, 0, 0, 0, np.pi], 1.0)
-    np.testing.assert_allclose(flipped, h.target_poses([0.6, 0, Z])[1], atol=1e-12)
+    flipped = poses.apply_twist(pose_at([0.6, 0, Z]), [0, 0, 0, 0, 0, np.pi], 1.0)
+    np.testing.assert_allclose(flipped, poses.target_poses([0.6, 0, Z])[1], atol=1e-12)
 
 
 # --- per-target action --------------------------------------------------------------------
@@ -111,12 +111,15 @@ def test_translation_action_is_minus_gradient_of_value_over_40(offset):
     eps = 1e-6
     grad = np.array(
         [
-            (h.target_value(pose_at(pose[:3, 3] + e), target) - h.target_value(pose_at(pose[:3, 3] - e), target))
+            (
+                huber.target_value(pose_at(pose[:3, 3] + e), target)
+                - huber.target_value(pose_at(pose[:3, 3] - e), target)
+            )
             / (2 * eps)
             for e in np.eye(3) * eps
         ]
     )
-    action = h.target_action(pose, target)
+    action = huber.target_action(pose, target)
     np.testing.assert_allclose(action[:3], -grad / C.robot_translation_cost, atol=1e-7)
     toward = (target[:3, 3] - pose[:3, 3]) / np.linalg.norm(offset)
     assert action[:3] @ toward == pytest.approx(np.linalg.norm(action[:3]))
@@ -124,52 +127,52 @@ def test_translation_action_is_minus_gradient_of_value_over_40(offset):
 
 def test_translation_speed_is_capped_and_slows_down_near_the_target():
     target = pose_at([0.6, 0.0, Z])
-    far = h.target_action(pose_at([0.0, 0.5, Z]), target)
+    far = huber.target_action(pose_at([0.0, 0.5, Z]), target)
     assert np.linalg.norm(far[:3]) == pytest.approx(0.06125)
     assert C.max_translation_speed == pytest.approx(0.06125)
-    speeds = [np.linalg.norm(h.target_action(pose_at([0.6 - d, 0, Z]), target)[:3]) for d in (0.005, 0.01, 0.019)]
+    speeds = [np.linalg.norm(huber.target_action(pose_at([0.6 - d, 0, Z]), target)[:3]) for d in (0.005, 0.01, 0.019)]
     assert speeds[0] < speeds[1] < speeds[2] < 0.06125
-    np.testing.assert_array_equal(h.target_action(target, target), np.zeros(6))
+    np.testing.assert_array_equal(huber.target_action(target, target), np.zeros(6))
 
 
 def test_rotation_action_turns_toward_the_target_the_short_way():
     target = pose_at([0.6, 0.0, Z])
     for axis in np.eye(3):
         for angle in (0.1, 1.0, 3.0):
-            tilted = h.apply_twist(target, np.r_[0, 0, 0, axis * angle], 1.0)
-            omega = h.target_action(tilted, target)[3:]
+            tilted = poses.apply_twist(target, np.r_[0, 0, 0, axis * angle], 1.0)
+            omega = huber.target_action(tilted, target)[3:]
             np.testing.assert_allclose(omega / np.linalg.norm(omega), -axis, atol=1e-9)
-            stepped = h.apply_twist(tilted, np.r_[0, 0, 0, omega], 0.025)
-            assert h.target_value(stepped, target) < h.target_value(tilted, target)
+            stepped = poses.apply_twist(tilted, np.r_[0, 0, 0, omega], 0.025)
+            assert huber.target_value(stepped, target) < huber.target_value(tilted, target)
 
 
 # --- goal values and belief ---------------------------------------------------------------
 
 
 def two_goals(y1: float = 0.12) -> np.ndarray:
-    return np.stack([h.target_poses([0.6, 0.0, Z]), h.target_poses([0.6, y1, Z])])
+    return np.stack([poses.target_poses([0.6, 0.0, Z]), poses.target_poses([0.6, y1, Z])])
 
 
 def test_goal_value_is_that_of_the_closer_target():
     goals = two_goals()
-    pose = h.apply_twist(pose_at([0.41, 0.05, Z]), [0, 0, 0, 0, 0, 2.9], 1.0)
-    values, q_values, best = h.goal_values(pose, np.zeros(6), goals)
+    pose = poses.apply_twist(pose_at([0.41, 0.05, Z]), [0, 0, 0, 0, 0, 2.9], 1.0)
+    values, q_values, best = huber.goal_values(pose, np.zeros(6), goals)
     np.testing.assert_array_equal(best, [1, 1])  # yawed almost pi: the flipped target
-    np.testing.assert_allclose(values, h.target_value(pose, goals).min(axis=1))
+    np.testing.assert_allclose(values, huber.target_value(pose, goals).min(axis=1))
     assert np.all(q_values > values)  # standing still is never optimal
 
 
 def simulate_approach(goals: np.ndarray, aim_xy, ticks: int = 80):
     """The teleoperation user drives the EE straight at ``aim_xy``; returns the beliefs."""
     pose = pose_at([0.41, 0.05, Z])
-    log_b = h.uniform_log_belief(len(goals))
+    log_b = hindsight.uniform_log_belief(len(goals))
     beliefs = []
     for _ in range(ticks):
         twist = th.user_twist(th.user_velocity(pose[:3, 3], aim_xy))
-        values, q_values, _ = h.goal_values(pose, twist, goals)
-        log_b = h.update_belief(log_b, values, q_values)
+        values, q_values, _ = huber.goal_values(pose, twist, goals)
+        log_b = hindsight.update_belief(log_b, values, q_values)
         beliefs.append(np.exp(log_b))
-        pose = h.apply_twist(pose, twist, 0.025)
+        pose = poses.apply_twist(pose, twist, 0.025)
     return np.array(beliefs)
 
 
@@ -182,13 +185,13 @@ def test_belief_moves_toward_the_goal_the_user_heads_for():
 
 
 def test_belief_stays_uniform_between_symmetric_goals():
-    goals = np.stack([h.target_poses([0.6, 0.05 - 0.06, Z]), h.target_poses([0.6, 0.05 + 0.06, Z])])
+    goals = np.stack([poses.target_poses([0.6, 0.05 - 0.06, Z]), poses.target_poses([0.6, 0.05 + 0.06, Z])])
     beliefs = simulate_approach(goals, aim_xy=[0.6, 0.05])
     np.testing.assert_allclose(beliefs, 0.5, atol=1e-12)
 
 
 def test_belief_is_capped_at_099_with_the_excess_spread_evenly():
-    log_b = h.update_belief(np.log([0.5, 0.3, 0.2]), np.zeros(3), np.array([0.0, 20.0, 25.0]))
+    log_b = hindsight.update_belief(np.log([0.5, 0.3, 0.2]), np.zeros(3), np.array([0.0, 20.0, 25.0]))
     b = np.exp(log_b)
     assert b.sum() == pytest.approx(1.0)
     assert b[0] == pytest.approx(0.99)
@@ -198,7 +201,7 @@ def test_belief_is_capped_at_099_with_the_excess_spread_evenly():
 
 
 def test_belief_update_is_plain_bayes_below_the_cap():
-    log_b = h.update_belief(np.log([0.5, 0.5]), np.array([1.0, 1.0]), np.array([1.1, 1.3]))
+    log_b = hindsight.update_belief(np.log([0.5, 0.5]), np.array([1.0, 1.0]), np.array([1.1, 1.3]))
     expected = np.array([np.exp(-0.1), np.exp(-0.3)])
     np.testing.assert_allclose(np.exp(log_b), expected / expected.sum())
 
@@ -210,7 +213,7 @@ USER = np.array([0.01, 0.02, 0, 0, 0, 0])
 
 
 def test_teleop_twist_is_belief_weighted_mean_plus_user():
-    twist = h.assisted_twist_teleop([0.5, 0.3, 0.2], ACTIONS, USER)
+    twist = hindsight.assisted_twist_teleop([0.5, 0.3, 0.2], ACTIONS, USER)
     np.testing.assert_allclose(twist, [0.51, 0.32, 0.2, 0, 0, 0])
 
 
@@ -225,33 +228,33 @@ def test_teleop_twist_is_belief_weighted_mean_plus_user():
     ],
 )
 def test_feasible_goal_mapping(values, visited, expected):
-    np.testing.assert_array_equal(h.feasible_goal_mapping(values, visited), expected)
+    np.testing.assert_array_equal(hindsight.feasible_goal_mapping(values, visited), expected)
 
 
 def test_collab_twist_follows_the_mapping_and_ignores_infeasible_goals():
-    twist = h.assisted_twist_collab([0.6, 0.3, 0.1], ACTIONS, [2, 2, 0])
+    twist = hindsight.assisted_twist_collab([0.6, 0.3, 0.1], ACTIONS, [2, 2, 0])
     np.testing.assert_allclose(twist, [0.1, 0, 0.9, 0, 0, 0])
-    none = h.assisted_twist_collab([0.6, 0.3, 0.1], ACTIONS, [-1, 2, -1])
+    none = hindsight.assisted_twist_collab([0.6, 0.3, 0.1], ACTIONS, [-1, 2, -1])
     np.testing.assert_allclose(none, [0, 0, 0.3, 0, 0, 0])
 
 
 def test_blending_follows_the_user_until_confident():
-    unsure = h.blend_twist([0.5, 0.3, 0.2], ACTIONS, USER)
+    unsure = blending.blend_twist([0.5, 0.3, 0.2], ACTIONS, USER)
     np.testing.assert_array_equal(unsure, USER)
-    sure = h.blend_twist([0.1, 0.8, 0.1], ACTIONS, USER)
+    sure = blending.blend_twist([0.1, 0.8, 0.1], ACTIONS, USER)
     np.testing.assert_allclose(sure, ACTIONS[1] + USER)
 
 
 def test_timid_blending_mixes_xy_by_confidence():
     conf = 0.6  # top-two gap: alpha = 1.5 * (0.6 - 0.4) = 0.3
-    twist = h.blend_twist([0.1, 0.75, 0.15], ACTIONS, USER, mode="timid")
+    twist = blending.blend_twist([0.1, 0.75, 0.15], ACTIONS, USER, mode="timid")
     assert pytest.approx(conf) == 0.75 - 0.15
     assisted = ACTIONS[1] + USER
     np.testing.assert_allclose(twist[:2], 0.3 * assisted[:2] + 0.7 * USER[:2])
-    capped = h.blend_twist([0.0, 0.99, 0.01], ACTIONS, USER, mode="timid")
+    capped = blending.blend_twist([0.0, 0.99, 0.01], ACTIONS, USER, mode="timid")
     np.testing.assert_allclose(capped[:2], 0.6 * assisted[:2] + 0.4 * USER[:2])
     with pytest.raises(ValueError, match="timid"):
-        h.blend_twist([1.0], ACTIONS[:1], USER, mode="bold")
+        blending.blend_twist([1.0], ACTIONS[:1], USER, mode="bold")
 
 
 # --- the prepared per-tick path -----------------------------------------------------------
@@ -262,42 +265,42 @@ def test_rotation_angle_matches_scipy_at_every_angle_including_half_turns():
     half_turns = Rotation.from_rotvec(np.pi * Rotation.random(20, random_state=rng).apply([1.0, 0.0, 0.0]))
     target = pose_at([0.6, 0.0, Z])
     for turn in [*Rotation.random(200, random_state=rng), *half_turns]:
-        _, angle = h.pose_distances(pose_at([0.5, 0.1, Z], turn.as_matrix() @ h.GOAL_ROTATION), target)
+        _, angle = poses.pose_distances(pose_at([0.5, 0.1, Z], turn.as_matrix() @ poses.GOAL_ROTATION), target)
         assert angle == pytest.approx(turn.magnitude(), abs=1e-12)
 
 
 @pytest.mark.parametrize("twist", [[0.03, -0.01, 0.0, 0.0, 0.0, 0.0], [0.03, -0.01, 0.01, 0.2, -0.1, 0.3]])
 def test_lookahead_agrees_with_the_per_target_functions(twist):
     goals = two_goals()
-    pose = h.apply_twist(pose_at([0.45, 0.02, Z]), [0, 0, 0, 0.1, 0.2, 0.3], 1.0)
-    look = h.lookahead(pose, twist, h.prepare_targets(goals))
-    after = h.apply_twist(pose, twist, C.action_apply_time)
-    np.testing.assert_allclose(np.reshape(look.values, (2, 2)), h.target_value(pose, goals), atol=1e-12)
-    np.testing.assert_allclose(np.reshape(look.q_values, (2, 2)), h.target_q_value(pose, twist, goals), atol=1e-12)
-    np.testing.assert_allclose(np.reshape(look.values_after, (2, 2)), h.target_value(after, goals), atol=1e-12)
+    pose = poses.apply_twist(pose_at([0.45, 0.02, Z]), [0, 0, 0, 0.1, 0.2, 0.3], 1.0)
+    look = huber.lookahead(pose, twist, poses.prepare_targets(goals))
+    after = poses.apply_twist(pose, twist, C.action_apply_time)
+    np.testing.assert_allclose(np.reshape(look.values, (2, 2)), huber.target_value(pose, goals), atol=1e-12)
+    np.testing.assert_allclose(np.reshape(look.q_values, (2, 2)), huber.target_q_value(pose, twist, goals), atol=1e-12)
+    np.testing.assert_allclose(np.reshape(look.values_after, (2, 2)), huber.target_value(after, goals), atol=1e-12)
     best = np.reshape(look.values_after, (2, 2)).argmin(axis=1)
-    expected = h.target_action(after, goals[np.arange(2), best])
-    np.testing.assert_allclose(h.goal_actions(look.after, look.values_after, 2), expected, atol=1e-12)
+    expected = huber.target_action(after, goals[np.arange(2), best])
+    np.testing.assert_allclose(huber.goal_actions(look.after, look.values_after, 2), expected, atol=1e-12)
 
 
 @pytest.mark.parametrize("twist", [[0.03, -0.01, 0.0, 0.0, 0.0, 0.0], [0.03, -0.01, 0.01, 0.2, -0.1, 0.3]])
 def test_teleop_step_is_belief_update_and_actions_after_the_twist(twist):
-    goals = np.stack([*two_goals(), h.target_poses([0.5, -0.1, Z])])
-    targets = h.prepare_targets(goals)
-    pose = h.apply_twist(pose_at([0.45, 0.02, Z]), [0, 0, 0, 0.1, 0.2, 0.3], 1.0)
+    goals = np.stack([*two_goals(), poses.target_poses([0.5, -0.1, Z])])
+    targets = poses.prepare_targets(goals)
+    pose = poses.apply_twist(pose_at([0.45, 0.02, Z]), [0, 0, 0, 0.1, 0.2, 0.3], 1.0)
     log_b = np.log([0.5, 0.3, 0.2])
-    look = h.lookahead(pose, twist, targets)
+    look = huber.lookahead(pose, twist, targets)
     values, q_values, _ = look.per_goal()
-    new_log_b, actions = h.teleop_step(pose, np.asarray(twist), targets, log_b)
-    np.testing.assert_array_equal(new_log_b, h.update_belief(log_b, values, q_values))
-    np.testing.assert_array_equal(actions, h.goal_actions(look.after, look.values_after, 2))
+    new_log_b, actions = hindsight.teleop_step(pose, np.asarray(twist), targets, log_b)
+    np.testing.assert_array_equal(new_log_b, hindsight.update_belief(log_b, values, q_values))
+    np.testing.assert_array_equal(actions, huber.goal_actions(look.after, look.values_after, 2))
 
 
 def test_within_needs_both_distance_and_angle():
-    targets = h.prepare_targets(h.target_poses([0.6, 0.0, Z]))
+    targets = poses.prepare_targets(poses.target_poses([0.6, 0.0, Z]))
     near = pose_at([0.6, 0.005, Z])
-    assert h.within(near, targets, distance=0.01, angle=0.1)
-    assert not h.within(near, targets, distance=0.004, angle=0.1)
-    tilted = h.apply_twist(near, [0, 0, 0, 0.3, 0, 0], 1.0)  # 0.3 rad from both targets
-    assert not h.within(tilted, targets, distance=0.01, angle=0.1)
-    assert h.within(tilted, targets, distance=0.01, angle=0.31)
+    assert poses.within(near, targets, distance=0.01, angle=0.1)
+    assert not poses.within(near, targets, distance=0.004, angle=0.1)
+    tilted = poses.apply_twist(near, [0, 0, 0, 0.3, 0, 0], 1.0)  # 0.3 rad from both targets
+    assert not poses.within(tilted, targets, distance=0.01, angle=0.1)
+    assert poses.within(tilted, targets, distance=0.01, angle=0.31)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hritest_plugins import hindsight as h
+from hritest_plugins import poses
 from hritest_plugins import teleop_human as th
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -74,7 +74,7 @@ def test_simulated_user_alone_reaches_the_goal_through_the_waypoints():
     for _ in range(1200):  # 30 s
         v = th.user_velocity(pose[:3, 3], path[index])
         index = th.next_waypoint_index(index, path, pose[:3, 3], v)
-        pose = h.apply_twist(pose, th.user_twist(v), 0.025)
+        pose = poses.apply_twist(pose, th.user_twist(v), 0.025)
         max_dev = max(max_dev, abs(pose[1, 3] - np.interp(pose[0, 3], path[:, 0], path[:, 1])))
     assert index == 6
     assert np.linalg.norm(pose[:2, 3] - GOAL) < 0.01
