@@ -15,19 +15,21 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
+from hritest.report.clusters import Cluster, cluster_failures
 from hritest.report.document import RECORDINGS, compare_document, run_document
 from hritest.report.html import Document, to_html, to_markdown
 from hritest.report.recordings import Recorded, record_failures
 from hritest.report.run import RunData, load_run
-from hritest.report.select import chosen_failures, most_different, worst_failures
+from hritest.report.select import chosen_failures, worst_failures
 from hritest.rundir import atomic_write
 
 __all__ = [
+    "Cluster",
     "RunData",
     "chosen_failures",
+    "cluster_failures",
     "compare_runs",
     "load_run",
-    "most_different",
     "worst_failures",
     "write_report",
 ]
@@ -49,7 +51,7 @@ def write_report(run_path: Path, *, recordings: int = RECORDINGS, out: Path | No
     data = load_run(run_path)
     out = Path(out) if out is not None else data.path / "report"
     out.mkdir(parents=True, exist_ok=True)
-    recorded = record_failures(data, chosen_failures(data.failures, data.ranges, recordings))
+    recorded = record_failures(data, chosen_failures(data.failures, data.clusters, recordings))
     for r in data.failures:  # link what earlier reports or replays recorded
         earlier = data.path / "recordings" / f"{r.index}.rrd"
         if r.index not in recorded and earlier.is_file():

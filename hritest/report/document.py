@@ -15,7 +15,7 @@ from hritest.report import figures
 from hritest.report.html import Badge, Code, Details, Document, Figure, Link, Section, Table, Text
 from hritest.report.recordings import Recorded
 from hritest.report.run import RunData
-from hritest.report.select import SPLITS, most_different, worst_failures
+from hritest.report.select import worst_failures
 
 RECORDINGS = 10  # the worst failures recorded by default (the most different ones come on top)
 
@@ -26,8 +26,7 @@ def run_document(
     """The report of one run as a document (no I/O: given the run and its recordings)."""
     spec = data.spec
     worst = worst_failures(data.failures, worst_count)
-    diverse = most_different(data.failures, data.ranges)
-    labelled = [r.index for _, r in diverse]  # one per block of the measure space: apart, so readable
+    labelled = [c.representative.index for c in data.clusters]
     sections = [Section("The run at a glance", _glance(data))]
     archive_blocks: list = [
         Figure(
@@ -35,9 +34,9 @@ def run_document(
             figures.archive_heatmap(_view(data, labelled)),
             alt=f"result archive of {data.name}",
             caption=f"Best objective ({spec.objective.expr}) in each cell of the result "
-            f"archive over {' and '.join(data.measure_names)}; grey cells are empty. Red "
-            f"circles are failures ({spec.failure}); the numbered ones are the most "
-            f"different failures, tabled below.",
+            f"archive over {' and '.join(data.measure_names)}; grey cells are empty. Circles "
+            f"are failures ({spec.failure}), coloured by kind; the numbered ones are each "
+            f"kind's representative, tabled below.",
         )
     ]
     sections.append(Section("Result archive", archive_blocks))
@@ -85,13 +84,26 @@ def run_document(
         sections.append(Section("Why they fail", _clause_blocks(data, recorded, link_base)))
         sections.append(
             Section(
-                f"Most different failures ({len(diverse)} regions)",
+                f"Kinds of failure ({len(data.clusters)})",
                 [
                     Text(
-                        f"Each measure's range is cut into {SPLITS}; each row is the worst failure in one block of the "
-                        f"measure space ({' / '.join(data.measure_names)})."
+                        "The failures clustered by how they behaved (measures, objective, every metric the task "
+                        "reports, and which clauses held). Each kind is represented by its worst failure."
                     ),
-                    _failure_table(data, diverse, recorded, link_base, label="region"),
+                    Table(
+                        ["kind", "failures", "what sets it apart", "representative"],
+                        [
+                            [str(i + 1), str(len(c.members)), "; ".join(c.traits) or "—", str(c.representative.index)]
+                            for i, c in enumerate(data.clusters)
+                        ],
+                    ),
+                    _failure_table(
+                        data,
+                        [(f"kind {i + 1}", c.representative) for i, c in enumerate(data.clusters)],
+                        recorded,
+                        link_base,
+                        label="kind",
+                    ),
                     Details(
                         f"All {len(data.failures)} failures, worst first",
                         [
@@ -190,6 +202,7 @@ def _view(data: RunData, labelled: Sequence[int], title: str | None = None) -> f
         elites=[(r.objective, list(r.measures)) for r in data.elites],
         failures=[(r.index, list(r.measures)) for r in data.failures],
         labelled=labelled,
+        kinds={r.index: i + 1 for i, c in enumerate(data.clusters) for r in c.members},
     )
 
 

@@ -9,7 +9,7 @@ on a ribs ``GridArchive`` rebuilt from the run's elites. It does not call that f
 from __future__ import annotations
 
 import io
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import matplotlib
@@ -23,6 +23,7 @@ from ribs.archives import GridArchive
 CMAP = "viridis"
 DPI = 110
 _FAILURE = "#e8251f"
+_KINDS = ("#e8251f", "#ff9f1c", "#ffffff", "#f72585", "#4cc9f0")  # kinds of failure: apart on viridis
 _EMPTY = "#e9e9ec"
 plt.rcParams.update({"font.size": 10, "axes.titlesize": 11, "axes.labelsize": 10, "figure.autolayout": False})
 
@@ -32,7 +33,8 @@ class ArchiveView:
     """What a heatmap shows: the elites of a result archive and the failures to mark on it.
 
     ``elites`` and ``failures`` are ``(objective, measures)`` and ``(id, measures)`` pairs;
-    ``labelled`` names the failure ids to write beside their marks.
+    ``labelled`` names the failure ids to write beside their marks; ``kinds`` maps a failure's id
+    to its kind (1, 2, ...), which colours its mark (all red without).
     """
 
     title: str
@@ -44,6 +46,7 @@ class ArchiveView:
     elites: Sequence[tuple[float, Sequence[float]]]
     failures: Sequence[tuple[int, Sequence[float]]] = ()
     labelled: Sequence[int] = field(default_factory=tuple)
+    kinds: Mapping[int, int] = field(default_factory=dict)
 
 
 def archive_heatmap(view: ArchiveView) -> bytes:
@@ -80,7 +83,7 @@ def qd_curves(series: Sequence[tuple[str, Sequence[dict]]], *, normalised: bool 
         evaluations = [0.0] + [float(r["evaluations"]) for r in rows]
         seconds = [0.0] + [float(r["wall_time"]) for r in rows]
         score = [0.0] + [float(r[key]) for r in rows]
-        style = dict(color=colour, marker="o", markersize=3.5, linewidth=1.6, label=label)
+        style = {"color": colour, "marker": "o", "markersize": 3.5, "linewidth": 1.6, "label": label}
         left.plot(evaluations, score, **style)
         right.plot(seconds, score, **style)
     name = "normalised QD-score" if normalised else "QD-score"
@@ -132,16 +135,19 @@ def _mark_failures(ax: plt.Axes, view: ArchiveView, dims: int) -> None:
     points = np.clip(points, ranges[:, 0], ranges[:, 1])
     if dims == 1:
         points = np.column_stack([points[:, 0], np.full(len(points), 0.5)])
-    ax.scatter(
-        points[:, 0],
-        points[:, 1],
-        s=30,
-        facecolors="none",
-        edgecolors=_FAILURE,
-        linewidths=1.1,
-        label=f"failure ({len(points)})",
-        zorder=3,
-    )
+    kinds = np.array([view.kinds.get(fid, 0) for fid, _ in view.failures])
+    for kind in np.unique(kinds):
+        mine = kinds == kind
+        ax.scatter(
+            points[mine, 0],
+            points[mine, 1],
+            s=30,
+            facecolors="none",
+            edgecolors=_FAILURE if kind == 0 else _KINDS[(kind - 1) % len(_KINDS)],
+            linewidths=1.3,
+            label=f"failure ({mine.sum()})" if kind == 0 else f"kind {kind} ({mine.sum()})",
+            zorder=3,
+        )
     labelled = set(view.labelled)
     for (fid, _), (x, y) in zip(view.failures, points):
         if fid in labelled:
@@ -152,7 +158,7 @@ def _mark_failures(ax: plt.Axes, view: ArchiveView, dims: int) -> None:
                 textcoords="offset points",
                 fontsize=8,
                 color="white",
-                bbox=dict(boxstyle="round,pad=0.15", fc="#8a1512", ec="none", alpha=0.9),
+                bbox={"boxstyle": "round,pad=0.15", "fc": "#8a1512", "ec": "none", "alpha": 0.9},
                 zorder=4,
             )
     ax.legend(loc="upper right", fontsize=8, framealpha=0.85)

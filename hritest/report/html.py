@@ -11,7 +11,6 @@ import base64
 import html
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Union
 
 
 @dataclass(frozen=True)
@@ -35,7 +34,7 @@ class Code:
     text: str
 
 
-Cell = Union[str, Link, Badge, Code]
+Cell = str | Link | Badge | Code
 
 
 @dataclass(frozen=True)
@@ -69,7 +68,7 @@ class Details:
     blocks: Sequence[Block]
 
 
-Block = Union[Table, Figure, Text, Details]
+Block = Table | Figure | Text | Details
 
 
 @dataclass(frozen=True)

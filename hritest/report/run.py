@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from hritest.records import EvaluationRecord
+from hritest.report.clusters import Cluster, cluster_failures
 from hritest.rundir import RunDirectory
 
 
@@ -24,6 +25,7 @@ class RunData:
     progress: Sequence[Mapping[str, float]]
     elites: Sequence[EvaluationRecord]
     failures: Sequence[EvaluationRecord]  # the reported failures, worst first
+    clusters: Sequence[Cluster]  # the kinds of failure, largest first
     surrogate: Mapping[str, Any] | None
 
     @property
@@ -71,6 +73,13 @@ def load_run(path: Path) -> RunData:
     by_index = {r.index: r for r in records}
     elite_ids = _elite_ids(run)
     surrogate = run.path / "surrogate.json"
+    failures = [by_index[i] for i in failure_ids(run, records) if i in by_index]
+    clusters = cluster_failures(
+        failures,
+        measure_names=[m.name for m in spec.measures],
+        ranges=[tuple(m.range) for m in spec.measures],
+        seed=int(run.meta.get("seed", 0)),
+    )
     return RunData(
         path=run.path,
         meta=run.meta,
@@ -78,7 +87,8 @@ def load_run(path: Path) -> RunData:
         records=records,
         progress=_read_progress(run.path / "progress.csv"),
         elites=[by_index[i] for i in elite_ids if i in by_index],
-        failures=[by_index[i] for i in failure_ids(run, records) if i in by_index],
+        failures=failures,
+        clusters=clusters,
         surrogate=json.loads(surrogate.read_text()) if surrogate.is_file() else None,
     )
 
@@ -96,7 +106,7 @@ def _elite_ids(run: RunDirectory) -> list[int]:
     if path.is_file():
         with open(path, newline="") as handle:
             return [int(row["evaluation"]) for row in csv.DictReader(handle)]
-    state = run.load_checkpoint()
-    if state is None or "result" not in state:
-        return []
-    return [int(i) for i in state["result"].data("evaluation")]
+    from hritest.search.state import load_state
+
+    state = load_state(run)  # verified as this user's before it is unpickled
+    return [] if state is None else [int(i) for i in state.result.data("evaluation")]

@@ -9,14 +9,15 @@ import re
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 from typer.testing import CliRunner
 
 from hritest import search as qd
 from hritest.cli import app
-from hritest.records import Clause, EvaluationRecord, Status
-from hritest.report import chosen_failures, most_different, worst_failures, write_report
+from hritest.records import Clause, EvaluationRecord, Status, rank_failures, worst_of_each_clause
+from hritest.report import chosen_failures, cluster_failures, load_run, worst_failures, write_report
 from hritest.rundir import RunDirectory
 
 FIXTURES = Path(__file__).parent.parent / "fixtures"
@@ -91,12 +92,11 @@ def test_report_lists_every_failure_and_links_recordings(run, reported):
     for failure in failures:
         assert f'<td class="num">{failure["id"]}</td>' in page
     recorded = sorted((run / "recordings").glob("*.rrd"))
-    # The 2 worst plus the worst of each block of the measure space.
-    records = {r["index"]: r for r in RunDirectory.open(run).evaluations()}
-    reported_failures = [records[f["id"]] for f in failures]
-    ranges = [(0.0, 0.32), (0.0, 0.087)]
-    expected = {r["index"] for r in worst_failures(reported_failures, 2)}
-    expected |= {r["index"] for _, r in most_different(reported_failures, ranges)}
+    # The 2 worst, the worst of each clause, and each kind's representative.
+    data = load_run(run)
+    expected = {r.index for r in worst_failures(data.failures, 2)}
+    expected |= {r.index for r in worst_of_each_clause(data.failures).values()}
+    expected |= {c.representative.index for c in data.clusters}
     assert {int(p.stem) for p in recorded} == expected
     for path in recorded:
         assert f'href="../recordings/{path.name}"' in page
@@ -112,16 +112,22 @@ def failure(index: int, objective: float, measures: list[float], fired: tuple[st
     )  # fmt: skip
 
 
-def test_most_different_takes_the_worst_failure_of_each_block():
-    failures = [
-        failure(1, 9.0, [0.05, 0.01]),
-        failure(2, 9.5, [0.06, 0.02]),  # same block as 1, worse
-        failure(3, 8.0, [0.31, 0.08]),
-        failure(4, 8.5, [0.5, 0.2]),  # out of range: clipped to the last block
-    ]
-    picked = most_different(failures, [(0.0, 0.32), (0.0, 0.087)])
-    assert [(block, r.index) for block, r in picked] == [("low / low", 2), ("high / high", 4)]
-    assert [r.index for r in worst_failures(failures, 3)] == [2, 1, 4]
+def test_failures_that_behave_apart_are_kinds_each_represented_by_its_worst():
+    # Two kinds: low goal distance with a long completion, and a high one tripping a safety clause.
+    rng = np.random.default_rng(0)
+    slow = [failure(i, 9.0 + rng.random(), [0.02 + 0.01 * rng.random(), 0.01], ("objective >= 8",)) for i in range(8)]
+    unsafe = [failure(20 + i, 3.0 + rng.random(), [0.28 + 0.01 * rng.random(), 0.08], ("gap < 0.1",)) for i in range(5)]
+    clusters = cluster_failures(slow + unsafe, measure_names=["distance", "variation"], ranges=[(0, 0.32), (0, 0.087)])
+    assert [sorted(r.index for r in c.members) for c in clusters] == [list(range(8)), list(range(20, 25))]
+    assert clusters[0].representative == rank_failures(slow)[0]
+    assert set(clusters[0].traits) == {
+        "variation low: 0.115 of its range (others 0.92)",
+        "'objective >= 8' holds in 100% (others 0%)",
+    }
+    assert "'gap < 0.1' holds in 100% (others 0%)" in clusters[1].traits
+    # Failures that are all alike are one kind, with nothing setting it apart.
+    [alike] = cluster_failures(slow, measure_names=["distance", "variation"], ranges=[(0, 0.32), (0, 0.087)])
+    assert len(alike.members) == 8 and alike.traits == ()
 
 
 def test_ties_rank_by_index_and_every_clause_that_fired_is_chosen_for_recording():
@@ -132,7 +138,7 @@ def test_ties_rank_by_index_and_every_clause_that_fired_is_chosen_for_recording(
         failure(9, 2.0, [0.1, 0.01], ("approach < 0.3",)),  # a safety failure, far from the worst objective
     ]
     assert [r.index for r in worst_failures(failures, 4)] == [3, 5, 7, 9]
-    chosen = chosen_failures(failures, [(0.0, 0.32), (0.0, 0.087)], 1)
+    chosen = chosen_failures(failures, [], 1)
     assert [r.index for r in chosen] == [3, 9]
 
 
