@@ -21,9 +21,12 @@ from hritest.protocols import TaskContext
 from hritest.repair import InfeasibleConstraints
 from hritest.scenario import Scenario, ScenarioSpace, Slot
 from hritest.sim.layout import START_CONFIG, ArmMount, BodyPose, Box, WorldLayout
-from hritest.spec import Spec, expr, source_of
+from hritest.spec import Spec, expr, load_spec, source_of
 from hritest.spec.references import ARM_TARGET, check_references
+from hritest.spec.source import SourceMap, read_yaml
 
+# Where each plugin is named in a spec, by kind.
+PLUGIN_FIELDS = {"task": ("task", "name"), "robot": ("robot", "policy"), "human": ("human", "policy")}
 REGION_COLOUR = (0.55, 0.75, 0.95, 0.6)
 OBJECT_COLOUR = (0.9, 0.5, 0.1, 1.0)
 
@@ -126,22 +129,8 @@ def compile_spec(spec: Spec, *, base: Path | None = None) -> Domain:
     """
     source = source_of(spec)
     base = base if base is not None else (Path(source.file).parent if source.file != "<spec>" else None)
-    classes: dict[str, type] = {}
-    issues = []
-    for kind, path, ref in (
-        ("task", ("task", "name"), spec.task.name),
-        ("robot", ("robot", "policy"), spec.robot.policy),
-        ("human", ("human", "policy"), spec.human.policy),
-    ):
-        try:
-            classes[kind] = plugins.resolve(ref, kind=kind, base=base)
-        except PluginError as exc:
-            issues.append(source.issue(path, str(exc)))
-        else:
-            issues += [
-                source.issue(path, f"{kind} plugin {ref!r}: {problem}")
-                for problem in contract.class_problems(classes[kind], kind=kind)
-            ]
+    refs = {"task": spec.task.name, "robot": spec.robot.policy, "human": spec.human.policy}
+    classes, issues = _resolve_plugins(refs, base=base, source=source)
     if issues:
         raise SpecError(issues, file=source.file)
 
@@ -186,6 +175,53 @@ def compile_spec(spec: Spec, *, base: Path | None = None) -> Domain:
     )
 
 
+def load_domain(path: str | Path, *, base: Path | None = None) -> Domain:
+    """Loads and compiles the spec at ``path``, with every independent problem in one error.
+
+    The plugins a spec names do not depend on the rest of it, so they are resolved even when
+    the spec has schema or name problems, and what is wrong with them is reported alongside.
+
+    Raises:
+        SpecError: as :func:`hritest.spec.load_spec` and :func:`compile_spec` do.
+    """
+    try:
+        spec = load_spec(path)
+    except SpecError as exc:
+        raise SpecError(exc.issues + _plugin_issues(path, base), file=exc.file) from None
+    return compile_spec(spec, base=base)
+
+
+def _plugin_issues(path: str | Path, base: Path | None) -> list:
+    """What is wrong with the plugins a spec file names, read from its data before any validation."""
+    try:
+        data, source = read_yaml(path)
+    except SpecError:
+        return []  # not a readable mapping: the first error says so
+    refs = {}
+    for kind, (section, key) in PLUGIN_FIELDS.items():
+        ref = data[section].get(key) if isinstance(data.get(section), dict) else None
+        if isinstance(ref, str):
+            refs[kind] = ref
+    return _resolve_plugins(refs, base=base if base is not None else Path(source.file).parent, source=source)[1]
+
+
+def _resolve_plugins(refs: Mapping[str, str], *, base: Path | None, source: SourceMap) -> tuple[dict[str, type], list]:
+    """The plugin classes ``refs`` name (kind -> reference), and the problems of those that fail."""
+    classes: dict[str, type] = {}
+    issues = []
+    for kind, ref in refs.items():
+        try:
+            classes[kind] = plugins.resolve(ref, kind=kind, base=base)
+        except PluginError as exc:
+            issues.append(source.issue(PLUGIN_FIELDS[kind], str(exc)))
+        else:
+            issues += [
+                source.issue(PLUGIN_FIELDS[kind], f"{kind} plugin {ref!r}: {problem}")
+                for problem in contract.class_problems(classes[kind], kind=kind)
+            ]
+    return classes, issues
+
+
 def _slots(spec: Spec) -> tuple[Slot, ...]:
     slots, start = [], 0
     for p in spec.parameters:
@@ -194,7 +230,7 @@ def _slots(spec: Spec) -> tuple[Slot, ...]:
     return tuple(slots)
 
 
-def _plugin_params(cls: type, given: Mapping[str, Any], path: tuple, spec: Spec, source) -> dict[str, Any]:
+def _plugin_params(cls: type, given: Mapping[str, Any], path: tuple, spec: Spec, source: SourceMap) -> dict[str, Any]:
     """Validates a plugin's ``params`` (and theta-bound names and bounds) against its ``Params`` model.
 
     A plugin without a ``Params`` model takes its params as given. Theta-bound names must be
@@ -319,7 +355,7 @@ def _spec_value(slot: Slot, space: ScenarioSpace, world: WorldLayout | None) -> 
     return None  # a body of the world model: the middle of the bounds unless a nominal is given
 
 
-def _check_world(spec: Spec, world: WorldLayout, scenario: Scenario, source) -> None:
+def _check_world(spec: Spec, world: WorldLayout, scenario: Scenario, source: SourceMap) -> None:
     """Builds the nominal world once, so a missing file, site or body is reported now, not mid-search."""
     from hritest.sim import World
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hritest.domain import compile_spec
+from hritest.domain import compile_spec, load_domain
 from hritest.errors import SpecError
 from hritest.spec import load_spec
 
@@ -174,3 +174,24 @@ def test_an_unknown_body_of_the_world_model_is_named_with_the_known_ones(toy_spe
         compile_spec(load_spec(spec))
     text = str(caught.value)
     assert "parameters[0].bind:" in text and "no body named 'window'" in text and "door" in text
+
+
+def test_load_domain_reports_every_independent_problem_at_once(toy_spec):
+    path = toy_spec("  time_limit: 10.0\n", "  time_limit: 10.0\n  timelimit: 3\n")
+    path.write_text(
+        path.read_text()
+        .replace("bind: task.g1x", "bind: goal9.x")
+        .replace("policy: toy_plugins.py:ToyRobot", "policy: toy_plugins.py:Nope")
+    )
+    with pytest.raises(SpecError) as info:
+        load_domain(path)
+    assert [issue.field for issue in info.value.issues] == ["task.timelimit", "parameters[2].bind", "robot.policy"]
+    assert "has no class 'Nope'" in info.value.issues[2].message
+
+
+def test_load_domain_reports_plugins_beside_schema_errors(toy_spec):
+    path = toy_spec("cells: 16}\n  - {name: variation", "cells: 0}\n  - {name: variation")
+    path.write_text(path.read_text().replace("policy: toy_plugins.py:ToyHuman", "policy: nowhere.py:Human"))
+    with pytest.raises(SpecError) as info:
+        load_domain(path)
+    assert [issue.field for issue in info.value.issues] == ["measures[0].cells", "human.policy"]

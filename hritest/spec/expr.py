@@ -51,6 +51,11 @@ _COMPARE = {
 }
 
 
+# An expression is a line of arithmetic; the cap keeps parsing, checking and every message that
+# quotes one small, whatever a shared spec holds.
+MAX_LENGTH = 500
+
+
 class ExpressionError(ValueError):
     """An expression that does not parse or uses something outside the whitelist."""
 
@@ -95,12 +100,18 @@ def parse(text: str, *, condition: bool = False) -> Expression:
     """
     if not isinstance(text, str) or not text.strip():
         raise ExpressionError("expected an expression such as 'completion_time' or 'norm(noise)'")
+    if len(text) > MAX_LENGTH:
+        raise ExpressionError(
+            f"is {len(text)} characters long; an expression has at most {MAX_LENGTH}: compute the rest in the "
+            "task plugin and report it as a metric"
+        )
     try:
         tree = ast.parse(text.strip(), mode="eval").body
     except SyntaxError as exc:
         raise ExpressionError(f"{text!r} is not a valid expression: {exc.msg}") from None
     names: set[str] = set()
     _check(tree, names)
+    _check_constants(tree)
     is_condition = isinstance(tree, ast.Compare | ast.BoolOp) or (
         isinstance(tree, ast.UnaryOp) and isinstance(tree.op, ast.Not)
     )
@@ -152,6 +163,31 @@ def _check(node: ast.AST, names: set[str]) -> None:
         raise ExpressionError(f"attribute access is not allowed: {ast.unparse(node)!r}")
     else:
         raise ExpressionError(f"{ast.unparse(node)!r} is not allowed ({type(node).__name__})")
+
+
+def _check_constants(tree: ast.expr) -> None:
+    """Computes every part of ``tree`` that holds no name, so that ``x / 0`` fails here and not in each run."""
+    for node in ast.walk(tree):
+        if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Div) and _constant(node.right):
+            _check_constants(node.right)
+            if _evaluate(node.right, {}) == 0:
+                raise ExpressionError(f"{ast.unparse(node)!r} divides by zero; change the divisor")
+        if not isinstance(node, ast.expr) or isinstance(node, ast.Name) or not _constant(node):
+            continue
+        try:
+            with np.errstate(all="raise"):
+                value = _evaluate(node, {})
+        except (ArithmeticError, ValueError, TypeError, FloatingPointError) as exc:
+            raise ExpressionError(
+                f"{ast.unparse(node)!r} cannot be computed ({exc or type(exc).__name__}); change that constant part"
+            ) from None
+        if not np.all(np.isfinite(value)):
+            raise ExpressionError(f"{ast.unparse(node)!r} is not a finite number; change that constant part")
+
+
+def _constant(node: ast.expr) -> bool:
+    """Whether ``node`` holds no name but the functions it calls."""
+    return not any(isinstance(n, ast.Name) and n.id not in FUNCTIONS for n in ast.walk(node))
 
 
 def _evaluate(node: ast.expr, env: Mapping[str, object]):  # noqa: ANN202 - numbers or arrays

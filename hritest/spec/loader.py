@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+import functools
 from pathlib import Path
 from typing import Any, get_args
 
@@ -10,7 +12,7 @@ import pydantic
 from hritest.errors import SpecError
 from hritest.spec.models import Spec
 from hritest.spec.references import check_references
-from hritest.spec.source import SourceMap, read_yaml
+from hritest.spec.source import SourceMap, read_yaml, shown
 
 
 def load_spec(path: str | Path) -> Spec:
@@ -20,15 +22,38 @@ def load_spec(path: str | Path) -> Spec:
         SpecError: every problem found, each with file, line, column and field path.
     """
     data, source = read_yaml(path)
+    issues = list(source.problems)
     try:
         spec = Spec.model_validate(data)
     except pydantic.ValidationError as exc:
-        raise SpecError(_pydantic_issues(exc, data, source), file=source.file) from None
-    found = check_references(spec)
-    if found:
-        raise SpecError([source.issue(path, message) for path, message in found], file=source.file)
+        issues += _pydantic_issues(exc, data, source)
+        spec = _without_unknown_keys(exc, data)
+    if spec is not None:
+        issues += [source.issue(path, message) for path, message in check_references(spec)]
+    if issues:
+        raise SpecError(issues, file=source.file)
     spec._source = source
     return spec
+
+
+def _without_unknown_keys(exc: pydantic.ValidationError, data: Any) -> Spec | None:
+    """The spec without its unknown keys, when they are its only problem; else ``None``.
+
+    An unknown key is ignored by nothing else, so the names can still be checked and every
+    independent problem reported in one run; other schema errors leave no spec to check.
+    """
+    errors = exc.errors(include_url=False)
+    if any(error["type"] != "extra_forbidden" for error in errors):
+        return None
+    pruned = copy.deepcopy(data)
+    for error in errors:
+        path = _data_path(error["loc"], data)
+        parent = functools.reduce(lambda node, part: node[part], path[:-1], pruned)
+        parent.pop(path[-1], None)
+    try:
+        return Spec.model_validate(pruned)
+    except pydantic.ValidationError:
+        return None
 
 
 def source_of(spec: Spec) -> SourceMap:
@@ -51,7 +76,9 @@ def _data_path(loc: tuple, data: Any) -> tuple:
     path: list[str | int] = []
     node = data
     for part in loc:
-        if (isinstance(node, dict) and part in node) or (isinstance(node, list) and isinstance(part, int) and 0 <= part < len(node)):
+        if (isinstance(node, dict) and part in node) or (
+            isinstance(node, list) and isinstance(part, int) and 0 <= part < len(node)
+        ):
             node = node[part]
         else:
             continue
@@ -64,14 +91,19 @@ def _reword(error: dict, path: tuple, data: Any) -> str:
     if kind == "extra_forbidden":
         allowed = _allowed_keys(path[:-1], data)
         hint = f"; allowed here: {', '.join(allowed)}" if allowed else ""
-        return f"unknown key {path[-1]!r}{hint}"
+        return f"unknown key {shown(path[-1])}{hint}"
     if kind == "missing":
         return f"missing required key {error['loc'][-1]!r}"
+    value = error.get("input")
+    if isinstance(value, bool) and kind in ("float_type", "int_type"):
+        return f"expected a number, not {str(value).lower()}; write the number itself"
+    if kind == "finite_number":
+        return f"expected a finite number, not {value}; write a number (not .nan or .inf)"
     msg = error["msg"]
     if msg.startswith("Value error, "):
         msg = msg[len("Value error, ") :]
     if kind not in ("value_error", "missing", "union_tag_invalid", "union_tag_not_found"):
-        msg = f"{msg} (got {error.get('input')!r})"
+        msg = f"{msg} (got {shown(value)})"
     return msg
 
 

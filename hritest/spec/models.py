@@ -9,16 +9,34 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, PrivateAttr, StringConstraints, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    PrivateAttr,
+    StringConstraints,
+    ValidationInfo,
+    field_validator,
+)
 
 from hritest.sim.layout import ROBOT_BASE
 from hritest.spec import expr
 
+# The largest search seed: torch's generators take unsigned 64-bit seeds, and hritest adds small
+# offsets to the run's seed for its networks; half the range leaves them room.
+MAX_SEED = 2**63 - 1
+
 Name = Annotated[
     str,
-    StringConstraints(pattern=r"^[A-Za-z][A-Za-z0-9_]*$"),
-    Field(description="letters, digits and '_', starting with a letter"),
+    StringConstraints(pattern=r"^[A-Za-z][A-Za-z0-9_]*$", max_length=64),
+    Field(description="letters, digits and '_', starting with a letter; at most 64"),
 ]
+
+
+# Numbers are strict: YAML reads true, yes and on as booleans, which pydantic would take as 1.
+Number = Annotated[float, Field(strict=True)]
+Count = Annotated[int, Field(strict=True)]
 
 
 def _check_interval(value: tuple[float, float]) -> tuple[float, float]:
@@ -28,10 +46,10 @@ def _check_interval(value: tuple[float, float]) -> tuple[float, float]:
     return value
 
 
-Interval = Annotated[tuple[float, float], AfterValidator(_check_interval)]
-Vec2 = tuple[float, float]
-Vec3 = tuple[float, float, float]
-PositiveFloat = Annotated[float, Field(gt=0)]
+Interval = Annotated[tuple[Number, Number], AfterValidator(_check_interval)]
+Vec2 = tuple[Number, Number]
+Vec3 = tuple[Number, Number, Number]
+PositiveFloat = Annotated[float, Field(gt=0, strict=True)]
 
 
 def _check_half_size(value: Vec3) -> Vec3:
@@ -41,7 +59,7 @@ def _check_half_size(value: Vec3) -> Vec3:
 
 
 HalfSize = Annotated[Vec3, AfterValidator(_check_half_size)]
-PositiveInt = Annotated[int, Field(gt=0)]
+PositiveInt = Annotated[int, Field(gt=0, strict=True)]
 
 
 def _numeric(text: str) -> str:
@@ -59,9 +77,9 @@ ConditionExpr = Annotated[str, AfterValidator(_condition)]
 
 
 class Strict(BaseModel):
-    """Base of every spec model: unknown keys are errors, values are immutable."""
+    """Base of every spec model: unknown keys are errors, values are immutable, numbers are finite."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class TaskSpec(Strict):
@@ -106,8 +124,8 @@ class ArmSpec(Strict):
     )
     ee_site: str = Field("ee", description="the name of the arm's tool site")
     base: Vec3 = Field(ROBOT_BASE, description="where the arm file's origin stands (m)")
-    yaw: float = Field(0.0, description="rad, about world z")
-    start: list[float] | None = Field(None, description="joint angles at reset; default: the model's own")
+    yaw: Number = Field(0.0, description="rad, about world z")
+    start: list[Number] | None = Field(None, description="joint angles at reset; default: the model's own")
 
 
 class WorldSpec(Strict):
@@ -142,25 +160,65 @@ class ParameterSpec(Strict):
 
     name: Name
     bind: str = Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*\.[A-Za-z][A-Za-z0-9_]*$")
-    bounds: Interval
-    size: PositiveInt = 1
-    nominal: float | list[float] | None = None
+    bounds: tuple[Number, Number]
+    size: Count = 1
+    nominal: Number | list[Number] | None = None
     description: str = ""
 
-    @model_validator(mode="after")
-    def _nominal_in_bounds(self) -> ParameterSpec:
-        if self.nominal is None:
-            return self
-        values = [self.nominal] if isinstance(self.nominal, float | int) else self.nominal
-        if len(values) not in (1, self.size):
-            raise ValueError(f"nominal has {len(values)} values; give one number or {self.size}")
-        lo, hi = self.bounds
+    # Each check names the parameter and its bounds: the message is read far from the line.
+    @field_validator("bounds")
+    @classmethod
+    def _bounds_in_order(cls, bounds: tuple[float, float], info: ValidationInfo) -> tuple[float, float]:
+        lo, hi = bounds
+        if not lo < hi:
+            raise ValueError(
+                f"{_parameter(info)} has bounds [{lo}, {hi}]: the lower end must be below the upper end; "
+                "write [low, high]"
+            )
+        return bounds
+
+    @field_validator("size")
+    @classmethod
+    def _size_positive(cls, size: int, info: ValidationInfo) -> int:
+        if size < 1:
+            raise ValueError(
+                f"{_parameter(info)}{_bounds(info)} has size {size}; it needs at least one component: "
+                "set size to 1 or more, or remove the parameter"
+            )
+        return size
+
+    @field_validator("nominal")
+    @classmethod
+    def _nominal_in_bounds(
+        cls, nominal: float | list[float] | None, info: ValidationInfo
+    ) -> float | list[float] | None:
+        if nominal is None or "bounds" not in info.data or "size" not in info.data:
+            return nominal
+        values = [nominal] if isinstance(nominal, float | int) else nominal
+        size = info.data["size"]
+        if len(values) not in (1, size):
+            raise ValueError(
+                f"{_parameter(info)} has size {size}, but its nominal has {len(values)} values; "
+                f"give one number or {size}"
+            )
+        lo, hi = info.data["bounds"]
         outside = [v for v in values if not lo <= v <= hi]
         if outside:
             raise ValueError(
-                f"nominal {outside} lies outside the bounds [{lo}, {hi}]; move it inside or widen the bounds"
+                f"{_parameter(info)}: nominal {outside} lies outside the bounds [{lo}, {hi}]; move it inside or "
+                "widen the bounds"
             )
-        return self
+        return nominal
+
+
+def _parameter(info: ValidationInfo) -> str:
+    name = info.data.get("name")
+    return f"parameter {name!r}" if name is not None else "this parameter"
+
+
+def _bounds(info: ValidationInfo) -> str:
+    bounds = info.data.get("bounds")
+    return f" (bounds [{bounds[0]}, {bounds[1]}])" if bounds is not None else ""
 
 
 class InsideConstraint(Strict):
@@ -215,7 +273,7 @@ class ObjectiveSpec(Strict):
 
     expr: NumericExpr
     range: Interval
-    repair_weight: float = Field(1.0, ge=0, description="search sees objective - weight * repair cost")
+    repair_weight: Number = Field(1.0, ge=0, description="search sees objective - weight * repair cost")
 
 
 class MeasureSpec(Strict):
@@ -235,16 +293,16 @@ class EmitterSettings(Strict):
     sigma0: PositiveFloat | None = Field(
         None, description="CMA-ES step in theta's units; default: a sixth of the bounds' typical width"
     )
-    x0: list[float] | None = Field(None, description="default: the nominal scenario (inside the bounds)")
-    learning_rate: float = Field(0.1, gt=0, le=1, description="archive learning rate alpha")
-    threshold_min: float = 0.0
+    x0: list[Number] | None = Field(None, description="default: the nominal scenario (inside the bounds)")
+    learning_rate: Number = Field(0.1, gt=0, le=1, description="archive learning rate alpha")
+    threshold_min: Number = 0.0
     gradient_lr: PositiveFloat = Field(1.0, description="DSAS gradient-ascent step")
 
 
 class MapElitesSettings(Strict):
     batch_size: PositiveInt = 20
     sigma: PositiveFloat | list[PositiveFloat] | None = Field(None, description="default: emitter.sigma0")
-    x0: list[float] | None = Field(None, description="where the first batch is sampled around; default: emitter.x0")
+    x0: list[Number] | None = Field(None, description="where the first batch is sampled around; default: emitter.x0")
 
 
 class RandomSettings(Strict):
@@ -278,11 +336,23 @@ class SurrogateSettings(Strict):
 class SearchSpec(Strict):
     algorithm: Literal["random", "map_elites", "cma_mae", "sas", "dsas"] = "dsas"
     budget: PositiveInt = 10_000
-    seed: int = 0
+    seed: Count = Field(
+        0,
+        description="0 to 2**63 - 1: numpy's SeedSequence takes no negative seed, and torch's generators "
+        "take 64 bits, of which hritest leaves room for the offsets it adds",
+    )
     emitter: EmitterSettings = Field(default_factory=EmitterSettings)
     map_elites: MapElitesSettings = Field(default_factory=MapElitesSettings)
     random: RandomSettings = Field(default_factory=RandomSettings)
     surrogate: SurrogateSettings = Field(default_factory=SurrogateSettings)
+
+    @field_validator("seed")
+    @classmethod
+    def _seed_in_range(cls, seed: int) -> int:
+        if not 0 <= seed <= MAX_SEED:
+            got = "a negative number" if seed < 0 else "a larger one"
+            raise ValueError(f"a seed is a whole number from 0 to 2**63 - 1 ({MAX_SEED}), got {got}")
+        return seed
 
 
 class Spec(Strict):

@@ -5,6 +5,9 @@ Each check returns issues with the exact field path, so the message can point at
 
 from __future__ import annotations
 
+import ast
+import keyword
+import math
 from collections.abc import Collection, Iterator
 
 from hritest.sim.layout import ARM_ATTRIBUTES, BODY_ATTRIBUTES
@@ -14,6 +17,11 @@ from hritest.spec.models import BoundsConstraint, Spec
 AGENT_TARGETS = ("human", "robot", "task")
 ARM_TARGET = "arm"
 OBJECT_ATTRIBUTES = ("x", "y", "z")
+
+# Sizes beyond which a search cannot start: the archives hold every cell up front (several
+# arrays of theta's length each), and each CMA-ES emitter a covariance of theta's length squared.
+MAX_CELLS = 1_000_000
+MAX_DIM = 1_000
 
 Found = Iterator[tuple[tuple[str | int, ...], str]]
 
@@ -25,9 +33,10 @@ def check_references(spec: Spec, *, metrics: Collection[str] | None = None) -> l
         metrics: the metric names the task provides; ``None`` skips the expression-name check
             (the task plugin is not loaded yet).
     """
-    found = [*_duplicates(spec), *_bindings(spec), *_constraints(spec), *_search(spec)]
+    found = [*_duplicates(spec), *_bindings(spec), *_constraints(spec), *_search(spec), *_sizes(spec)]
+    found += [*_unusable_names(spec), *_indices(spec)]
     if metrics is not None:
-        found += list(_expression_names(spec, set(metrics)))
+        found += [*_shadowed_metrics(spec, set(metrics)), *_expression_names(spec, set(metrics))]
     return found
 
 
@@ -123,12 +132,8 @@ def _constraints(spec: Spec) -> Found:
     for i, constraint in enumerate(spec.constraints):
         for j, name in enumerate(getattr(constraint, "objects", [])):
             if name not in objects:
-                yield (
-                    ("constraints", i, "objects", j),
-                    (
-                        f"unknown object {name!r}; the objects are {', '.join(sorted(objects)) or 'none: add them under objects'}"
-                    ),
-                )
+                known = ", ".join(sorted(objects)) or "none: add them under objects"
+                yield ("constraints", i, "objects", j), f"unknown object {name!r}; the objects are {known}"
         for j, name in enumerate(getattr(constraint, "regions", [])):
             if name not in region_names:
                 known = ", ".join(sorted(region_names)) or "none: add them under workspace.regions"
@@ -186,3 +191,79 @@ def _expression_names(spec: Spec, metrics: set[str]) -> Found:
                     f"known here: {', '.join(sorted(scope))}"
                 ),
             )
+
+
+def _sizes(spec: Spec) -> Found:
+    dim = sum(p.size for p in spec.parameters)
+    if dim > MAX_DIM:
+        yield (
+            ("parameters",),
+            f"theta has {dim:,} components; a search handles at most {MAX_DIM:,}: reduce the parameters' sizes",
+        )
+    cells = math.prod(m.cells for m in spec.measures)
+    if cells > MAX_CELLS:
+        product = " x ".join(f"{m.cells:,}" for m in spec.measures)
+        yield (
+            ("measures",),
+            f"the archive would have {product} = {cells:,} cells; at most {MAX_CELLS:,} fit in memory: "
+            "reduce the measures' cells",
+        )
+
+
+def _unusable_names(spec: Spec) -> Found:
+    """Names that an expression cannot refer to: Python keywords and the expression functions."""
+    for field, items in (("parameters", spec.parameters), ("measures", spec.measures)):
+        for i, item in enumerate(items):
+            if keyword.iskeyword(item.name) or item.name in expr.FUNCTIONS:
+                what = "a Python keyword" if keyword.iskeyword(item.name) else "a function of expressions"
+                yield (field, i, "name"), f"{item.name!r} is {what}, so no expression can refer to it; rename it"
+
+
+def _shadowed_metrics(spec: Spec, metrics: set[str]) -> Found:
+    """Names that hide a metric: in an expression the name would mean the parameter or measure, silently.
+
+    A measure that is the metric itself (``{name: speed, expr: speed}``) hides nothing.
+    """
+    for i, param in enumerate(spec.parameters):
+        if param.name in metrics:
+            yield (
+                ("parameters", i, "name"),
+                (
+                    f"parameter {param.name!r} has the name of the task's metric {param.name!r} ({spec.task.name}); "
+                    "in expressions the parameter would hide the metric: rename the parameter"
+                ),
+            )
+    for i, measure in enumerate(spec.measures):
+        if measure.name in metrics and measure.expr.strip() != measure.name:
+            yield (
+                ("measures", i, "name"),
+                (
+                    f"measure {measure.name!r} ({measure.expr}) has the name of the task's metric {measure.name!r} "
+                    f"({spec.task.name}); in the failure condition the measure would hide the metric: rename the "
+                    "measure"
+                ),
+            )
+
+
+def _indices(spec: Spec) -> Found:
+    """Indexes that no scenario can satisfy: past a parameter group's end, or into a single number."""
+    sizes = {p.name: p.size for p in spec.parameters} | {m.name: 1 for m in spec.measures} | {"objective": 1}
+    texts = [(("objective", "expr"), spec.objective.expr, False)]
+    texts += [(("measures", i, "expr"), m.expr, False) for i, m in enumerate(spec.measures)]
+    texts.append((("failure",), spec.failure, True))
+    for path, text, condition in texts:
+        for node in ast.walk(expr.parse(text, condition=condition).tree):
+            if not isinstance(node, ast.Subscript):
+                continue
+            name, index = node.value.id, node.slice.value
+            size = sizes.get(name)
+            if size is None:
+                continue  # a metric, or a name that does not exist: both checked once the task is known
+            if size == 1:
+                yield path, f"{name!r} is one number, not a group: write {name}, not {ast.unparse(node)}"
+            elif index >= size:
+                yield (
+                    path,
+                    f"{ast.unparse(node)} is past the end of {name!r}, which has {size} components: "
+                    f"{name}[0] to {name}[{size - 1}]",
+                )

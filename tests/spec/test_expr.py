@@ -80,3 +80,30 @@ def test_arithmetic_matches_python(a, b):
     if b != 0:
         assert parse("a / b").evaluate(env) == a / b
     assert parse("norm(a, b)").evaluate(env) == pytest.approx(math.hypot(a, b))
+
+
+@pytest.mark.parametrize(
+    ("text", "words"),
+    [
+        ("completion_time / 0", "'completion_time / 0' divides by zero"),
+        ("completion_time / (2 - 2)", "divides by zero"),
+        ("completion_time / (1 / 0)", "'1 / 0' divides by zero"),
+        ("sqrt(-1) + completion_time", "'sqrt(-1)' cannot be computed (math domain error)"),
+        ("1e999 * completion_time", "is not a finite number"),
+    ],
+)
+def test_constant_parts_that_cannot_be_computed_are_refused(text, words):
+    with pytest.raises(ExpressionError) as info:
+        parse(text)
+    assert words in str(info.value)
+
+
+def test_constant_parts_that_can_be_computed_are_fine():
+    assert parse("completion_time / (2 - 1) + norm(3, 4)").evaluate({"completion_time": 5.0}) == 10.0
+
+
+def test_an_expression_too_long_is_refused_without_quoting_it():
+    text = " + ".join(["completion_time"] * 100)
+    with pytest.raises(ExpressionError) as info:
+        parse(text)
+    assert f"is {len(text)} characters long" in str(info.value) and len(str(info.value)) < 200

@@ -20,9 +20,7 @@ PLACED = (
 
 def error_of(path: Path, *, compile: bool = True) -> SpecError:
     with pytest.raises(SpecError) as info:
-        spec = load_spec(path)
-        if compile:
-            compile_spec(spec)
+        (compile_spec if compile else lambda spec: spec)(load_spec(path))
     return info.value
 
 
@@ -237,3 +235,15 @@ def test_every_issue_is_reported_at_once(toy_spec):
 def test_search_settings_must_match_theta(toy_spec):
     issue = only_issue(error_of(toy_spec("budget: 500", "budget: 500\n  emitter: {x0: [0, 0]}")))
     assert issue.field == "search.emitter.x0" and "7 components" in issue.message
+
+
+def test_unknown_keys_do_not_hide_the_name_checks(toy_spec):
+    path = toy_spec("  time_limit: 10.0\n", "  time_limit: 10.0\n  timelimit: 3\n")
+    path.write_text(path.read_text().replace("bind: task.g1x", "bind: goal9.x").replace("budget: 500", "budgt: 500"))
+    error = error_of(path, compile=False)
+    assert [issue.field for issue in error.issues] == ["task.timelimit", "search.budgt", "parameters[2].bind"]
+
+
+def test_echoed_input_is_cut_short(toy_spec):
+    issue = only_issue(error_of(toy_spec("time_limit: 10.0", "time_limit: " + "x" * 100_000)))
+    assert issue.field == "task.time_limit" and len(issue.message) < 200
