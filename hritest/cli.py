@@ -61,13 +61,12 @@ def _root(
 @command
 def validate(specs: Annotated[list[Path], typer.Argument(help="one or more spec files")]) -> None:
     """Check specs: schema, names, plugins, expressions. Prints every problem with file:line:column."""
-    from hritest.domain import compile_spec
-    from hritest.spec import load_spec
+    from hritest.domain import load_domain
 
     bad = 0
     for path in specs:
         try:
-            compile_spec(load_spec(path))
+            load_domain(path)
         except HritestError as exc:
             bad += 1
             err.print(f"[red]invalid[/red] {path}", highlight=False)
