@@ -32,6 +32,11 @@ class Slot:
     def labels(self) -> list[str]:
         return [self.name] if self.size == 1 else [f"{self.name}[{i}]" for i in range(self.size)]
 
+    @property
+    def part(self) -> slice:
+        """Where the slot lies in theta: ``theta[slot.part]``."""
+        return slice(self.start, self.start + self.size)
+
 
 @dataclass(frozen=True, kw_only=True)
 class Scenario:

@@ -104,7 +104,7 @@ def shrink(domain: Domain, theta: np.ndarray, *, seed: int, clause: str | None =
         raise ShrinkError(f"the clause {clause!r} does not hold for this scenario; the ones that do: {fired}")
     state = _State(domain=domain, seed=seed, clause=clause, budget=budget, theta=theta, evaluation=first)
     nominal = np.asarray(domain.nominal, dtype=float)
-    slices = _slices(domain)
+    slices = {slot.name: slot.part for slot in domain.space.slots}
     state.try_(nominal.copy(), "every parameter nominal")
     for name, part in slices.items():
         if not _at(state.theta[part], nominal[part]):
@@ -164,15 +164,6 @@ def _toward(theta: np.ndarray, nominal: np.ndarray, part: slice, fraction: float
 
 def _at(values: np.ndarray, nominal: np.ndarray) -> bool:
     return bool(np.all(np.abs(np.asarray(values) - np.asarray(nominal)) <= SAME))
-
-
-def _slices(domain: Domain) -> dict[str, slice]:
-    """Each spec parameter's components in theta."""
-    slices, start = {}, 0
-    for p in domain.spec.parameters:
-        slices[p.name] = slice(start, start + p.size)
-        start += p.size
-    return slices
 
 
 @dataclass
