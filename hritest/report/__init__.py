@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from hritest.report.clusters import Cluster, cluster_failures
+from hritest.report.contrast import contrast
 from hritest.report.document import RECORDINGS, compare_document, run_document
 from hritest.report.html import Document, to_html, to_markdown
 from hritest.report.recordings import Recorded, record_failures
@@ -40,8 +41,9 @@ def write_report(run_path: Path, *, recordings: int = RECORDINGS, out: Path | No
 
     Args:
         run_path: the run directory.
-        recordings: record this many worst failures plus the most different ones
-            (0: record nothing, but link the recordings already there).
+        recordings: record this many worst failures, plus the worst of each failure clause and
+            each kind's representative, and look for the first kind's counterfactual (0: record
+            and search nothing, but show what earlier reports left).
         out: the report folder (default ``<run>/report``).
 
     Raises:
@@ -56,7 +58,8 @@ def write_report(run_path: Path, *, recordings: int = RECORDINGS, out: Path | No
         earlier = data.path / "recordings" / f"{r.index}.rrd"
         if r.index not in recorded and earlier.is_file():
             recorded[r.index] = Recorded(earlier, None)
-    doc = run_document(data, recorded, link_base=out, worst_count=max(recordings, RECORDINGS))
+    against = contrast(data, data.clusters[0].representative, search=recordings > 0) if data.clusters else None
+    doc = run_document(data, recorded, link_base=out, worst_count=max(recordings, RECORDINGS), contrast=against)
     _write(doc, out)
     return out / "index.html"
 

@@ -12,6 +12,7 @@ from typing import Any
 
 from hritest.records import EvaluationRecord, clauses_text, rank_failures, worst_of_each_clause
 from hritest.report import figures
+from hritest.report.contrast import Contrast
 from hritest.report.html import Badge, Code, Details, Document, Figure, Link, Section, Table, Text
 from hritest.report.recordings import Recorded
 from hritest.report.run import RunData
@@ -21,9 +22,15 @@ RECORDINGS = 10  # the worst failures recorded by default (the most different on
 
 
 def run_document(
-    data: RunData, recorded: Mapping[int, Recorded], *, link_base: Path, worst_count: int = RECORDINGS
+    data: RunData,
+    recorded: Mapping[int, Recorded],
+    *,
+    link_base: Path,
+    worst_count: int = RECORDINGS,
+    contrast: Contrast | None = None,
 ) -> Document:
-    """The report of one run as a document (no I/O: given the run and its recordings)."""
+    """The report of one run as a document (no I/O: given the run, its recordings and the first
+    kind's counterfactual)."""
     spec = data.spec
     worst = worst_failures(data.failures, worst_count)
     labelled = [c.representative.index for c in data.clusters]
@@ -82,6 +89,8 @@ def run_document(
             )
         )
         sections.append(Section("Why they fail", _clause_blocks(data, recorded, link_base)))
+        if contrast is not None:
+            sections.append(Section("What would have passed", _contrast_blocks(data, contrast)))
         sections.append(
             Section(
                 f"Kinds of failure ({len(data.clusters)})",
@@ -296,6 +305,33 @@ def _clause_blocks(data: RunData, recorded: Mapping[int, Recorded], link_base: P
         Text("The worst failure of each clause that held:"),
         _failure_table(data, rows, recorded, link_base, label="clause"),
     ]
+
+
+def _contrast_blocks(data: RunData, contrast: Contrast) -> list:
+    """The first kind's representative beside the nearest passing scenario found."""
+    failure, passing = contrast.failure, contrast.passing
+    if passing is None:
+        return [Text(f"No passing scenario near failure {failure.index}: {contrast.reason}.", note=True)]
+    changed = ", ".join(contrast.changed)
+    intro = Text(
+        f"Failure {failure.index}, the representative of the largest kind, beside the nearest passing scenario "
+        f"a {contrast.evaluations}-simulation search found (same seed): changing {changed} "
+        f"(a distance of {contrast.distance:.3g} in theta scaled by the bounds) makes it pass."
+    )
+    labels = data.labels
+    parameters = Table(
+        ["parameter", "failure", "passing", "change"],
+        [
+            [label, _fmt(a), _fmt(b), _fmt(b - a) if abs(b - a) > 1e-12 else ""]
+            for label, a, b in zip(labels, failure.theta_repaired, passing["theta_repaired"])
+        ],
+        caption="Scenario parameters (repaired theta)",
+    )
+    rows = [["objective", _fmt(failure.objective), _fmt(passing["objective"])]]
+    rows += [[m, _fmt(a), _fmt(b)] for m, a, b in zip(data.measure_names, failure.measures, passing["measures"])]
+    rows += [[k, _fmt(v), _fmt(passing["metrics"].get(k, math.nan))] for k, v in failure.metrics.items()]
+    outcome = Table(["", "failure", "passing"], rows, caption="Outcome and every metric")
+    return [intro, parameters, outcome]
 
 
 def _replay_note(data: RunData, recorded: Mapping[int, Recorded]) -> str:

@@ -260,3 +260,14 @@ def test_a_second_report_reuses_the_recordings_of_the_first(tmp_path):
     page = write_report(run, recordings=2).read_text()
     assert all(p.stat().st_mtime_ns != made[p.name] for p in (run / "recordings").glob("*.rrd"))
     assert "were re-simulated from their stored raw theta and seed (now)" in page
+
+
+def test_the_largest_kinds_failure_is_shown_beside_the_nearest_passing_scenario(run, reported):
+    page = reported.read_text()
+    representative = load_run(run).clusters[0].representative
+    stored = json.loads((run / "counterfactuals" / f"{representative.index}.json").read_text())
+    assert "What would have passed" in page and f"Failure {representative.index}, the representative" in page
+    assert stored["changed"] and stored["passing"]["objective"] < 8  # the toy's failure condition: objective >= 8
+    made = (run / "counterfactuals" / f"{representative.index}.json").stat().st_mtime_ns
+    write_report(run, recordings=2)  # a second report reads it back
+    assert (run / "counterfactuals" / f"{representative.index}.json").stat().st_mtime_ns == made

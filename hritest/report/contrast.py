@@ -1,0 +1,74 @@
+"""A failure beside the nearest passing scenario found (:mod:`hritest.counterfactual`), for the
+report; searched once per scenario and kept in ``<run>/counterfactuals/<id>.json``."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from typing import Any
+
+from hritest.records import EvaluationRecord
+from hritest.report.run import RunData
+from hritest.rundir import RunDirectory, atomic_write
+
+BUDGET = 40  # simulations the report spends looking for a failure's counterfactual
+
+
+@dataclass(frozen=True)
+class Contrast:
+    """``failure`` and the passing scenario nearest to it that the search found (``passing`` holds
+    its ``theta``, ``objective``, ``measures`` and ``metrics``), or why none was found."""
+
+    failure: EvaluationRecord
+    passing: dict[str, Any] | None
+    changed: tuple[str, ...] = ()
+    distance: float = float("nan")
+    evaluations: int = 0
+    reason: str = ""
+
+
+def contrast(data: RunData, failure: EvaluationRecord, *, search: bool = True, budget: int = BUDGET) -> Contrast:
+    """The counterfactual of ``failure``: read back if this scenario's was searched before, else
+    searched now (unless not ``search``)."""
+    from hritest.counterfactual import CounterfactualError, counterfactual
+    from hritest.replay import run_domain, scenario_digest
+
+    path = data.path / "counterfactuals" / f"{failure.index}.json"
+    digest = scenario_digest(data.meta["spec_digest"], failure.theta_repaired, failure.seed)
+    try:
+        stored = json.loads(path.read_text())
+    except (OSError, ValueError):
+        stored = {}
+    if stored.get("digest") != digest and not search:
+        return Contrast(failure=failure, passing=None, reason="not searched for this report (--recordings 0)")
+    if stored.get("digest") != digest:
+        domain = run_domain(RunDirectory.open(data.path))
+        try:
+            found = counterfactual(domain, failure.theta, seed=failure.seed, budget=budget)
+        except CounterfactualError as exc:
+            stored = {"digest": digest, "reason": str(exc)}
+        else:
+            passing = found.passing
+            stored = {
+                "digest": digest,
+                "passing": {
+                    "theta": found.theta.tolist(),
+                    "theta_repaired": passing.theta_repaired.tolist(),
+                    "objective": passing.objective,
+                    "measures": passing.measures.tolist(),
+                    "metrics": dict(passing.metrics),
+                },
+                "changed": list(found.changed),
+                "distance": found.distance,
+                "evaluations": found.evaluations,
+            }
+        path.parent.mkdir(exist_ok=True)
+        atomic_write(path, json.dumps(stored, indent=1))
+    return Contrast(
+        failure=failure,
+        passing=stored.get("passing"),
+        changed=tuple(stored.get("changed", ())),
+        distance=float(stored.get("distance", float("nan"))),
+        evaluations=int(stored.get("evaluations", 0)),
+        reason=stored.get("reason", ""),
+    )
