@@ -18,15 +18,20 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 from hritest_plugins import poses, scene
+from hritest_plugins.actions import RobotAction
 from pydantic import BaseModel, ConfigDict, Field
 
 from hritest import metrics
 from hritest.protocols import HumanPolicy, RobotPolicy, Rollout, TaskContext
 from hritest.sim import shared_world
+
+if TYPE_CHECKING:
+    from hritest.sim import World
+    from hritest.sim.world import SceneTracer
 
 HAND_HEIGHT = 0.96
 
@@ -54,6 +59,25 @@ class _Agent:
     goal: int | None = None
     wait: float = 0.0
     done_goals: list[int] = field(default_factory=list)
+
+
+@dataclass(eq=False)
+class _Episode:
+    """One run of the task: the world, what is computed once per episode, and what changes."""
+
+    world: World
+    goals: np.ndarray  # (n, 3) box centres
+    targets: np.ndarray  # (n, 2, 4, 4) the goals' target poses, as the robot observes them
+    robot_checks: list[poses.Targets]  # per goal, for the robot's at-goal check
+    others: list[np.ndarray]  # per goal, the human's other boxes
+    start_q: np.ndarray
+    home: np.ndarray  # where the robot resets to; its base joint turns by pi on a replan
+    hand: np.ndarray
+    hand_pose: np.ndarray
+    record: _Record
+    h: _Agent = field(default_factory=lambda: _Agent("moving"))
+    r: _Agent = field(default_factory=lambda: _Agent("moving"))
+    blocked: dict[int, str] = field(default_factory=dict)  # goal -> who works on it
 
 
 class CollaborationTask:
@@ -95,7 +119,7 @@ class CollaborationTask:
         self.layout = replace(context.world, hand_start=tuple(self.start))
 
     def _ticks(self, seconds: float) -> int:
-        return int(round(seconds / self.dt))
+        return round(seconds / self.dt)
 
     def _wait_or_work(
         self, agent: _Agent, who: str, work_time: float, blocked: dict[int, str], record: _Record, t: float
@@ -108,118 +132,159 @@ class CollaborationTask:
             record.event(t, f"{who} starts work on {self.names[agent.goal]}")
 
     def run(self, *, robot: RobotPolicy, human: HumanPolicy, rng: np.random.Generator) -> Rollout:
-        p, world = self.params, shared_world(self.layout)
-        targets = scene.goal_targets(self.scenario, self.names)
-        goals = np.array([self.scenario.objects[n] for n in self.names], dtype=float)
-        # Per goal, computed once: the robot's at-goal check and the human's other boxes.
-        robot_checks = [poses.prepare_targets(goal_targets) for goal_targets in targets]
-        others = [np.delete(goals, goal, axis=0) for goal in range(len(goals))]
-        start_q = world.q
-        home = start_q.copy()
-        hand = self.start.copy()
-        hand_pose = np.eye(4)
-        hand_pose[:3, :3] = poses.GOAL_ROTATION
-        h, r = _Agent("moving"), _Agent("moving")
-        blocked: dict[int, str] = {}
-        record = _Record(world.tracer())
+        ep = self._start()
         who_h, who_r = f"human plugin {type(human).__name__}", f"robot plugin {type(robot).__name__}"
         tick = 0
         for tick in range(self.ticks):
-            if h.state == r.state == "done":
+            if ep.h.state == ep.r.state == "done":
                 break
             t = tick * self.dt
-            idle = r.state == "idle"  # the human may set the robot going below; it starts afresh
-            # Human: act, or move its state machine on.
-            velocity = np.zeros(3)
-            if h.state == "moving":
-                goal = self.order[len(h.done_goals)]
-                if math.hypot(*(hand[:2] - goals[goal, :2]).tolist()) < p.position_tolerance:
-                    h.state, h.goal = "waiting", goal
-                else:
-                    velocity = scene.checked(
-                        human.act({"hand_position": hand, "goal_position": goals[goal], "other_goals": others[goal]}),
-                        who_h,
-                        (3,),
-                    )
-            if h.state == "waiting":
-                self._wait_or_work(h, "human", p.human_work_time, blocked, record, t)
-            elif h.state == "working":
-                h.timer -= 1
-                if h.timer <= 0:
-                    del blocked[h.goal]
-                    h.done_goals.append(h.goal)
-                    hand = self.start.copy()
-                    h.state = "done" if len(h.done_goals) == len(self.order) else "resetting"
-                    record.event(t, f"human finished {self.names[h.goal]}")
-            elif h.state == "resetting" and r.state in ("idle", "done"):
-                h.state = "moving"
-                if r.state == "idle":
-                    r.state = "moving"
-            if h.state == "done" and r.state == "idle":
-                r.state = "moving"
-
-            # Robot: it acts every tick, so its belief is tracked throughout; it moves when "moving".
-            pose = world.ee_pose()
-            hand_pose = hand_pose.copy()  # a new array each tick: a robot may keep what it is given
-            hand_pose[:3, 3] = hand
-            action = robot.act(
-                {
-                    "ee_pose": pose,
-                    "hand_pose": hand_pose,
-                    "hand_velocity": velocity,
-                    "goal_targets": targets,
-                    "visited": tuple(r.done_goals),
-                    "reset": idle or r.state == "idle",
-                }
-            )
-            twist = scene.checked(action.twist, who_r, (6,))
-            # Wrong-goal probability counts while the human heads for its goal: between goals the
-            # belief still (rightly) names the box just finished, which says nothing of inference.
-            human_goal = self.order[len(h.done_goals)] if h.state == "moving" else None
-            world.set_hand(hand)
-            record.tick(pose, hand, h.state, r.state, action.belief, human_goal)
-            # A pause entered on this tick (a replan) starts counting down on the next, like work.
-            counting = r.state in ("working", "resetting", "replanning")
-            if r.state == "moving":
-                reached = [
-                    g
-                    for g in range(len(goals))
-                    if g not in r.done_goals
-                    and (action.goal is None or action.goal == g)
-                    and scene.at_goal(pose, robot_checks[g], distance=p.position_tolerance, angle=p.angle_tolerance)
-                ]
-                if reached:
-                    r.state, r.goal = "waiting", reached[0]
-                else:
-                    step = world.step_twist(twist, self.dt)
-                    if (step.limit_reached and np.linalg.norm(twist[:3]) > 1e-4) or world.self_collision():
-                        home[0] = start_q[0] if home[0] != start_q[0] else _flip(start_q[0])
-                        world.set_q(home)
-                        r.state, r.timer = "replanning", self._ticks(p.replan_time)
-                        record.event(t, "robot replans")
-                        record.replans += 1
-            if r.state == "waiting":
-                self._wait_or_work(r, "robot", p.robot_work_time, blocked, record, t)
-            elif counting:
-                r.timer -= 1
-                if r.timer <= 0:
-                    if r.state == "working":
-                        del blocked[r.goal]
-                        r.done_goals.append(r.goal)
-                        record.event(t, f"robot finished {self.names[r.goal]}")
-                        world.set_q(home)
-                        if len(r.done_goals) == len(goals):
-                            r.state = "done"
-                        else:
-                            r.state, r.timer = "resetting", self._ticks(p.robot_reset_time)
-                    elif r.state == "resetting":
-                        r.state = "moving" if h.state == "done" else "idle"
-                    else:
-                        r.state = "moving"
-            hand = hand + velocity * self.dt
-        finished = h.state == r.state == "done"
+            idle = ep.r.state == "idle"  # the human may set the robot going below; it starts afresh
+            velocity = self._human_step(ep, human, who_h, t)
+            self._robot_step(ep, robot, who_r, velocity, idle, t)
+            ep.hand = ep.hand + velocity * self.dt
+        finished = ep.h.state == ep.r.state == "done"
         completion = tick * self.dt if finished else self.ticks * self.dt
-        return record.rollout(self, completion, goals, h.wait, r.wait, finished)
+        return ep.record.rollout(self, completion, ep.goals, ep.h.wait, ep.r.wait, finished)
+
+    def _start(self) -> _Episode:
+        """A reset world and what the episode computes once: per goal, the robot's at-goal check
+        and the human's other boxes."""
+        world = shared_world(self.layout)
+        goals = np.array([self.scenario.objects[n] for n in self.names], dtype=float)
+        targets = scene.goal_targets(self.scenario, self.names)
+        start_q = world.q
+        hand_pose = np.eye(4)
+        hand_pose[:3, :3] = poses.GOAL_ROTATION
+        return _Episode(
+            world=world,
+            goals=goals,
+            targets=targets,
+            robot_checks=[poses.prepare_targets(goal_targets) for goal_targets in targets],
+            others=[np.delete(goals, goal, axis=0) for goal in range(len(goals))],
+            start_q=start_q,
+            home=start_q.copy(),
+            hand=self.start.copy(),
+            hand_pose=hand_pose,
+            record=_Record(world.tracer()),
+        )
+
+    def _human_step(self, ep: _Episode, human: HumanPolicy, who: str, t: float) -> np.ndarray:
+        """The human acts, or its state machine moves on; returns the hand's velocity this tick.
+        A human that finishes or sets off again may set an idle robot going."""
+        p, h, r = self.params, ep.h, ep.r
+        velocity = np.zeros(3)
+        if h.state == "moving":
+            goal = self.order[len(h.done_goals)]
+            if math.hypot(*(ep.hand[:2] - ep.goals[goal, :2]).tolist()) < p.position_tolerance:
+                h.state, h.goal = "waiting", goal
+            else:
+                observation = {
+                    "hand_position": ep.hand,
+                    "goal_position": ep.goals[goal],
+                    "other_goals": ep.others[goal],
+                }
+                velocity = scene.checked(human.act(observation), who, (3,))
+        if h.state == "waiting":
+            self._wait_or_work(h, "human", p.human_work_time, ep.blocked, ep.record, t)
+        elif h.state == "working":
+            h.timer -= 1
+            if h.timer <= 0:
+                del ep.blocked[h.goal]
+                h.done_goals.append(h.goal)
+                ep.hand = self.start.copy()
+                h.state = "done" if len(h.done_goals) == len(self.order) else "resetting"
+                ep.record.event(t, f"human finished {self.names[h.goal]}")
+        elif h.state == "resetting" and r.state in ("idle", "done"):
+            h.state = "moving"
+            if r.state == "idle":
+                r.state = "moving"
+        if h.state == "done" and r.state == "idle":
+            r.state = "moving"
+        return velocity
+
+    def _robot_step(
+        self, ep: _Episode, robot: RobotPolicy, who: str, velocity: np.ndarray, idle: bool, t: float
+    ) -> None:
+        """The robot acts every tick, so its belief is tracked throughout; it moves when "moving"."""
+        pose, action, twist = self._robot_act(ep, robot, who, velocity, idle)
+        # A pause entered on this tick (a replan) starts counting down on the next, like work.
+        counting = ep.r.state in ("working", "resetting", "replanning")
+        if ep.r.state == "moving":
+            self._robot_move(ep, pose, action.goal, twist, t)
+        if ep.r.state == "waiting":
+            self._wait_or_work(ep.r, "robot", self.params.robot_work_time, ep.blocked, ep.record, t)
+        elif counting:
+            self._robot_count_down(ep, t)
+
+    def _robot_act(
+        self, ep: _Episode, robot: RobotPolicy, who: str, velocity: np.ndarray, idle: bool
+    ) -> tuple[np.ndarray, RobotAction, np.ndarray]:
+        """The robot's action on this tick's observation, and the tick recorded: ``(ee pose,
+        action, checked twist)``."""
+        pose = ep.world.ee_pose()
+        ep.hand_pose = ep.hand_pose.copy()  # a new array each tick: a robot may keep what it is given
+        ep.hand_pose[:3, 3] = ep.hand
+        action = robot.act(
+            {
+                "ee_pose": pose,
+                "hand_pose": ep.hand_pose,
+                "hand_velocity": velocity,
+                "goal_targets": ep.targets,
+                "visited": tuple(ep.r.done_goals),
+                "reset": idle or ep.r.state == "idle",
+            }
+        )
+        twist = scene.checked(action.twist, who, (6,))
+        # Wrong-goal probability counts while the human heads for its goal: between goals the
+        # belief still (rightly) names the box just finished, which says nothing of inference.
+        human_goal = self.order[len(ep.h.done_goals)] if ep.h.state == "moving" else None
+        ep.world.set_hand(ep.hand)
+        ep.record.tick(pose, ep.hand, ep.h.state, ep.r.state, action.belief, human_goal)
+        return pose, action, twist
+
+    def _robot_move(self, ep: _Episode, pose: np.ndarray, heading: int | None, twist: np.ndarray, t: float) -> None:
+        """A moving robot stops at an unvisited goal (the one it is ``heading`` for, if it says),
+        or takes one tick of ``twist``; a joint limit or a self-collision makes it replan."""
+        p, r, world = self.params, ep.r, ep.world
+        reached = [
+            g
+            for g in range(len(ep.goals))
+            if g not in r.done_goals
+            and (heading is None or heading == g)
+            and scene.at_goal(pose, ep.robot_checks[g], distance=p.position_tolerance, angle=p.angle_tolerance)
+        ]
+        if reached:
+            r.state, r.goal = "waiting", reached[0]
+            return
+        step = world.step_twist(twist, self.dt)
+        if (step.limit_reached and np.linalg.norm(twist[:3]) > 1e-4) or world.self_collision():
+            ep.home[0] = ep.start_q[0] if ep.home[0] != ep.start_q[0] else _flip(ep.start_q[0])
+            world.set_q(ep.home)
+            r.state, r.timer = "replanning", self._ticks(p.replan_time)
+            ep.record.event(t, "robot replans")
+            ep.record.replans += 1
+
+    def _robot_count_down(self, ep: _Episode, t: float) -> None:
+        """One tick of work, reset or replanning; at its end the robot finishes its box (and
+        resets, unless it was the last), goes idle (or on, once the human is done), or moves."""
+        r = ep.r
+        r.timer -= 1
+        if r.timer > 0:
+            return
+        if r.state == "working":
+            del ep.blocked[r.goal]
+            r.done_goals.append(r.goal)
+            ep.record.event(t, f"robot finished {self.names[r.goal]}")
+            ep.world.set_q(ep.home)
+            if len(r.done_goals) == len(ep.goals):
+                r.state = "done"
+            else:
+                r.state, r.timer = "resetting", self._ticks(self.params.robot_reset_time)
+        elif r.state == "resetting":
+            r.state = "moving" if ep.h.state == "done" else "idle"
+        else:
+            r.state = "moving"
 
 
 def _flip(angle: float) -> float:
@@ -230,7 +295,7 @@ def _flip(angle: float) -> float:
 class _Record:
     """Per-tick arrays of one episode, turned into a :class:`Rollout` at the end."""
 
-    def __init__(self, tracer) -> None:  # noqa: ANN001 - a hritest.sim world tracer
+    def __init__(self, tracer: SceneTracer) -> None:
         self.tracer = tracer
         self.ee, self.hand, self.beliefs = [], [], []
         self.human_goals: list[int] = []  # per belief: the human's goal, -1 while it has none
