@@ -18,10 +18,16 @@ from pydantic import (
     StringConstraints,
     ValidationInfo,
     field_validator,
+    model_validator,
 )
 
 from hritest.sim.layout import ROBOT_BASE
 from hritest.spec import expr
+
+# Sizes beyond any episode or search that can finish: ticks per episode (a task may allocate
+# arrays of this length), and solutions per batch (each one theta, all in memory at once).
+MAX_TICKS = 1_000_000
+MAX_BATCH = 100_000
 
 # The largest search seed: torch's generators take unsigned 64-bit seeds, and hritest adds small
 # offsets to the run's seed for its networks; half the range leaves them room.
@@ -60,6 +66,7 @@ def _check_half_size(value: Vec3) -> Vec3:
 
 HalfSize = Annotated[Vec3, AfterValidator(_check_half_size)]
 PositiveInt = Annotated[int, Field(gt=0, strict=True)]
+BatchSize = Annotated[int, Field(gt=0, le=MAX_BATCH, strict=True)]
 
 
 def _numeric(text: str) -> str:
@@ -89,6 +96,16 @@ class TaskSpec(Strict):
     time_limit: PositiveFloat = Field(description="seconds of simulated time before the episode stops")
     dt: PositiveFloat = Field(0.025, description="simulation tick in seconds (40 Hz in the paper)")
     params: dict[str, Any] = Field(default_factory=dict)
+
+    @model_validator(mode="after")
+    def _ticks(self) -> TaskSpec:
+        ticks = round(self.time_limit / self.dt)
+        if not 1 <= ticks <= MAX_TICKS:
+            raise ValueError(
+                f"time_limit / dt is {ticks:,} ticks; an episode has 1 to {MAX_TICKS:,}: change the time limit "
+                "or the tick"
+            )
+        return self
 
 
 class BoxSpec(Strict):
@@ -288,8 +305,8 @@ class MeasureSpec(Strict):
 class EmitterSettings(Strict):
     """CMA-ES emitters of CMA-MAE, SAS (CMA-MAE inner loop) and DSAS (CMA-MAEGA inner loop)."""
 
-    emitters: PositiveInt = 8
-    batch_size: PositiveInt = 37
+    emitters: Annotated[int, Field(gt=0, le=1_000, strict=True)] = 8
+    batch_size: BatchSize = 37
     sigma0: PositiveFloat | None = Field(
         None, description="CMA-ES step in theta's units; default: a sixth of the bounds' typical width"
     )
@@ -300,13 +317,13 @@ class EmitterSettings(Strict):
 
 
 class MapElitesSettings(Strict):
-    batch_size: PositiveInt = 20
+    batch_size: BatchSize = 20
     sigma: PositiveFloat | list[PositiveFloat] | None = Field(None, description="default: emitter.sigma0")
     x0: list[Number] | None = Field(None, description="where the first batch is sampled around; default: emitter.x0")
 
 
 class RandomSettings(Strict):
-    batch_size: PositiveInt = 100
+    batch_size: BatchSize = 100
 
 
 class SurrogateSettings(Strict):
@@ -318,7 +335,7 @@ class SurrogateSettings(Strict):
         None, description="cells per measure of the selection archive; one random elite per block is evaluated"
     )
     epochs: PositiveInt = 100
-    batch_size: PositiveInt = 64
+    batch_size: BatchSize = 64
     learning_rate: PositiveFloat = 1e-4
     training: Literal["paper", "incremental"] = Field(
         "paper",
@@ -335,7 +352,7 @@ class SurrogateSettings(Strict):
 
 class SearchSpec(Strict):
     algorithm: Literal["random", "map_elites", "cma_mae", "sas", "dsas"] = "dsas"
-    budget: PositiveInt = 10_000
+    budget: Annotated[int, Field(gt=0, le=1_000_000_000, strict=True)] = 10_000
     seed: Count = Field(
         0,
         description="0 to 2**63 - 1: numpy's SeedSequence takes no negative seed, and torch's generators "

@@ -6,7 +6,7 @@ import pytest
 
 from hritest.errors import SpecError
 from hritest.spec import load_spec
-from hritest.spec.models import MAX_SEED
+from hritest.spec.models import MAX_BATCH, MAX_SEED, MAX_TICKS
 
 
 def only_issue(path):
@@ -100,3 +100,30 @@ def test_a_nominal_outside_the_bounds_names_the_parameter(toy_spec):
     issue = only_issue(toy_spec("bounds: [-0.05, 0.05]", "bounds: [-0.05, 0.05], nominal: [0, 0, 3]"))
     assert issue.field == "parameters[4].nominal"
     assert "parameter 'noise': nominal [3.0] lies outside the bounds [-0.05, 0.05]" in issue.message
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "field", "words"),
+    [
+        (
+            "time_limit: 10.0",
+            "time_limit: 1.0e+12",
+            "task",
+            f"40,000,000,000,000 ticks; an episode has 1 to {MAX_TICKS:,}",
+        ),
+        ("dt: 0.025", "dt: 30", "task", "0 ticks"),
+        ("budget: 500", "budget: 1000000000000", "search.budget", "less than or equal to 1000000000"),
+        ("budget: 500", "budget: 500\n  emitter: {emitters: 100000}", "search.emitter.emitters", "less than or equal"),
+        ("budget: 500", "budget: 500\n  random: {batch_size: 1000000000}", "search.random.batch_size", f"{MAX_BATCH}"),
+        (
+            "budget: 500",
+            "budget: 500\n  emitter: {batch_size: 1000000000}",
+            "search.emitter.batch_size",
+            f"{MAX_BATCH}",
+        ),
+    ],
+)
+def test_sizes_no_episode_or_search_can_hold(toy_spec, old, new, field, words):
+    issue = only_issue(toy_spec(old, new))
+    assert issue.field == field
+    assert words in issue.message, issue.message
