@@ -17,7 +17,7 @@ from hritest_plugins.huber import DEFAULT_CONSTANTS, HuberConstants, _goal_actio
 from hritest_plugins.poses import Targets, _pose
 from numpy.typing import ArrayLike
 
-from hritest.compiled import kernel
+from hritest.jit import kernel
 
 
 def uniform_log_belief(n_goals: int) -> np.ndarray:

@@ -28,7 +28,7 @@ from hritest_plugins.poses import (
 )
 from numpy.typing import ArrayLike
 
-from hritest.compiled import kernel
+from hritest.jit import kernel
 
 
 @dataclass(frozen=True, kw_only=True)

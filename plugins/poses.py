@@ -4,7 +4,7 @@ Shapes: a pose is a 4x4 homogeneous matrix; ``targets`` may carry leading batch 
 (``(..., 4, 4)``) and every per-target function maps over them. A twist is
 ``[vx, vy, vz, wx, wy, wz]`` in the world frame. Target poses are prepared once per episode
 (:func:`prepare_targets`: positions and orientation quaternions), so that the rotation from a pose
-to a target is one quaternion product. The kernels (``_``-prefixed, :data:`hritest.compiled.kernel`)
+to a target is one quaternion product. The kernels (``_``-prefixed, :data:`hritest.jit.kernel`)
 take and return plain arrays; the public functions wrap them, and every function taking
 ``targets`` accepts 4x4 poses or :class:`Targets`.
 """
@@ -17,7 +17,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 
-from hritest.compiled import kernel
+from hritest.jit import kernel
 
 #: Orientation of every goal pose: rows ``[[0, 0, 1], [1, 0, 0], [0, 1, 0]]``.
 GOAL_ROTATION = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])

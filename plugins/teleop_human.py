@@ -14,7 +14,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
-from hritest.compiled import kernel
+from hritest.jit import kernel
 
 #: Number of waypoints from start to goal, both included (5 noisy interior points).
 N_WAYPOINTS = 7

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from hritest.compiled import kernel
+from hritest.jit import kernel
 
 LIMIT_RATIO = 0.6  # the reference's "joint limit reached" threshold on the translation ratio
 

@@ -24,7 +24,7 @@ import mujoco
 import numpy as np
 from numpy.typing import ArrayLike
 
-from hritest.compiled import kernel
+from hritest.jit import kernel
 from hritest.errors import HritestError
 from hritest.sim.control import twist_to_joint_velocity
 from hritest.sim.layout import SceneTrace, WorldLayout
