@@ -130,7 +130,10 @@ def parse_yaml(text: str, *, file: str) -> tuple[Any, yaml.Node | None, list[Iss
     except RecursionError:
         raise SpecError(Issue((), _too_deep()), file=file) from None
     except ValueError as exc:  # a value YAML parses but Python refuses, such as an integer of 5,000 digits
-        raise SpecError(Issue((), f"holds a value that cannot be read: {exc}"), file=file) from None
+        what = str(exc).split(";")[0]  # Python's own advice after the ';' is not for spec writers
+        raise SpecError(
+            Issue((), f"holds a value that cannot be read ({what}); write a shorter number"), file=file
+        ) from None
     finally:
         loader.dispose()
     return data, root, problems
