@@ -7,6 +7,7 @@ Defaults are the paper's settings (``../shared/reference/dsas-reference-code.md`
 
 from __future__ import annotations
 
+import math
 from typing import Annotated, Any, Literal
 
 from pydantic import (
@@ -69,6 +70,24 @@ PositiveInt = Annotated[int, Field(gt=0, strict=True)]
 BatchSize = Annotated[int, Field(gt=0, le=MAX_BATCH, strict=True)]
 
 
+def _finite_params(params: dict[str, Any]) -> dict[str, Any]:
+    """A plugin's params hold any YAML, but no NaN or infinity: a plugin's model may well accept them."""
+    stack = [([key], value) for key, value in params.items()]
+    while stack:
+        path, value = stack.pop()
+        if isinstance(value, float) and not math.isfinite(value):
+            where = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in path).lstrip(".")
+            raise ValueError(f"{where} is {value}; write a finite number (not .nan or .inf)")
+        if isinstance(value, dict):
+            stack += [([*path, key], item) for key, item in value.items()]
+        elif isinstance(value, list):
+            stack += [([*path, i], item) for i, item in enumerate(value)]
+    return params
+
+
+Params = Annotated[dict[str, Any], AfterValidator(_finite_params)]
+
+
 def _numeric(text: str) -> str:
     expr.parse(text)
     return text
@@ -95,7 +114,7 @@ class TaskSpec(Strict):
     name: str = Field(description="registered task name (shared_control, collaboration) or module:Class")
     time_limit: PositiveFloat = Field(description="seconds of simulated time before the episode stops")
     dt: PositiveFloat = Field(0.025, description="simulation tick in seconds (40 Hz in the paper)")
-    params: dict[str, Any] = Field(default_factory=dict)
+    params: Params = Field(default_factory=dict)
 
     @model_validator(mode="after")
     def _ticks(self) -> TaskSpec:
@@ -282,7 +301,7 @@ class PolicySpec(Strict):
     """A robot or human policy: a registered name, ``module:Class`` or ``path/file.py:Class``."""
 
     policy: str
-    params: dict[str, Any] = Field(default_factory=dict)
+    params: Params = Field(default_factory=dict)
 
 
 class ObjectiveSpec(Strict):

@@ -127,3 +127,20 @@ def test_sizes_no_episode_or_search_can_hold(toy_spec, old, new, field, words):
     issue = only_issue(toy_spec(old, new))
     assert issue.field == field
     assert words in issue.message, issue.message
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "field", "words"),
+    [
+        ("time_limit: 10.0\n", "time_limit: 10.0\n  params: {scale: .nan}\n", "task.params", "scale is nan"),
+        (
+            "policy: toy_plugins.py:ToyHuman\n",
+            "policy: toy_plugins.py:ToyHuman\n  params: {speed: 1, gains: {p: [1, -.inf]}}\n",
+            "human.params",
+            "gains.p[1] is -inf",
+        ),
+    ],
+)
+def test_plugin_params_are_finite(toy_spec, old, new, field, words):
+    issue = only_issue(toy_spec(old, new))
+    assert issue.field == field and words in issue.message, issue.message
