@@ -21,8 +21,9 @@ from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
-from hritest_plugins import poses, scene
-from hritest_plugins.actions import RobotAction
+from hritest_plugins import poses
+from hritest_plugins.actions import RobotAction, checked
+from hritest_plugins.goals import at_goal, goal_targets
 from pydantic import BaseModel, ConfigDict, Field
 
 from hritest import metrics
@@ -152,7 +153,7 @@ class CollaborationTask:
         and the human's other boxes."""
         world = shared_world(self.layout)
         goals = np.array([self.scenario.objects[n] for n in self.names], dtype=float)
-        targets = scene.goal_targets(self.scenario, self.names)
+        targets = goal_targets(self.scenario, self.names)
         start_q = world.q
         hand_pose = np.eye(4)
         hand_pose[:3, :3] = poses.GOAL_ROTATION
@@ -160,7 +161,7 @@ class CollaborationTask:
             world=world,
             goals=goals,
             targets=targets,
-            robot_checks=[poses.prepare_targets(goal_targets) for goal_targets in targets],
+            robot_checks=[poses.prepare_targets(two) for two in targets],
             others=[np.delete(goals, goal, axis=0) for goal in range(len(goals))],
             start_q=start_q,
             home=start_q.copy(),
@@ -184,7 +185,7 @@ class CollaborationTask:
                     "goal_position": ep.goals[goal],
                     "other_goals": ep.others[goal],
                 }
-                velocity = scene.checked(human.act(observation), who, (3,))
+                velocity = checked(human.act(observation), who, (3,))
         if h.state == "waiting":
             self._wait_or_work(h, "human", p.human_work_time, ep.blocked, ep.record, t)
         elif h.state == "working":
@@ -235,7 +236,7 @@ class CollaborationTask:
                 "reset": idle or ep.r.state == "idle",
             }
         )
-        twist = scene.checked(action.twist, who, (6,))
+        twist = checked(action.twist, who, (6,))
         # Wrong-goal probability counts while the human heads for its goal: between goals the
         # belief still (rightly) names the box just finished, which says nothing of inference.
         human_goal = self.order[len(ep.h.done_goals)] if ep.h.state == "moving" else None
@@ -252,7 +253,7 @@ class CollaborationTask:
             for g in range(len(ep.goals))
             if g not in r.done_goals
             and (heading is None or heading == g)
-            and scene.at_goal(pose, ep.robot_checks[g], distance=p.position_tolerance, angle=p.angle_tolerance)
+            and at_goal(pose, ep.robot_checks[g], distance=p.position_tolerance, angle=p.angle_tolerance)
         ]
         if reached:
             r.state, r.goal = "waiting", reached[0]

@@ -12,7 +12,9 @@ import math
 from typing import ClassVar
 
 import numpy as np
-from hritest_plugins import poses, scene
+from hritest_plugins import poses
+from hritest_plugins.actions import checked
+from hritest_plugins.goals import at_goal, goal_targets
 from pydantic import BaseModel, ConfigDict, Field
 
 from hritest import metrics
@@ -61,7 +63,7 @@ class SharedControlTask:
     def run(self, *, robot: RobotPolicy, human: HumanPolicy, rng: np.random.Generator) -> Rollout:
         p, world = self.params, shared_world(self.layout)
         tracer = world.tracer()
-        targets = scene.goal_targets(self.scenario, self.goal_names)
+        targets = goal_targets(self.scenario, self.goal_names)
         true = self.goal_names.index(p.true_goal)
         true_targets = poses.prepare_targets(targets[true])
         goal_position = self.scenario.objects[p.true_goal]
@@ -72,15 +74,15 @@ class SharedControlTask:
             pose = world.ee_pose()
             ee.append(pose[:3, 3].copy())
             tracer.capture()
-            if scene.at_goal(pose, true_targets, distance=p.position_tolerance, angle=p.angle_tolerance):
+            if at_goal(pose, true_targets, distance=p.position_tolerance, angle=p.angle_tolerance):
                 reached = True
                 events.append((tick * self.dt, f"reached {p.true_goal}"))
                 break
             if tick == self.ticks:
                 break
-            user = scene.checked(human.act({"ee_position": pose[:3, 3], "goal_position": goal_position}), who_h, (6,))
+            user = checked(human.act({"ee_position": pose[:3, 3], "goal_position": goal_position}), who_h, (6,))
             action = robot.act({"ee_pose": pose, "user_twist": user, "goal_targets": targets})
-            twist = scene.checked(action.twist, who_r, (6,))
+            twist = checked(action.twist, who_r, (6,))
             if action.belief is not None:
                 beliefs.append(np.asarray(action.belief, dtype=float))
             world.step_twist(twist, self.dt)

@@ -1,8 +1,6 @@
-"""What both tasks share: goal targets, goal checks, checked plugin outputs."""
+"""The goals both tabletop tasks share: each goal's target poses, and whether a pose has reached one."""
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 from hritest_plugins import poses
@@ -27,13 +25,3 @@ def at_goal(pose: np.ndarray, targets: poses.Targets | np.ndarray, *, distance: 
     Pass :class:`poses.Targets` when checking every tick.
     """
     return poses.within(pose, targets, distance=distance, angle=angle)
-
-
-def checked(value: np.ndarray, who: str, shape: tuple[int, ...]) -> np.ndarray:
-    """``value`` as a float array of ``shape``, or a ValueError naming the plugin at fault."""
-    array = np.asarray(value, dtype=float)
-    if array.shape != shape:
-        raise ValueError(f"{who} returned shape {array.shape}, expected {shape}")
-    if not all(map(math.isfinite, array.flat)):  # plain floats: a handful of numbers, twice a tick
-        raise ValueError(f"{who} returned a non-finite value: {array.tolist()}")
-    return array
