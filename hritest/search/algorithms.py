@@ -36,10 +36,10 @@ class UniformEmitter(EmitterBase):
 
 
 def x0(domain: Domain) -> np.ndarray:
-    """The emitters' start: the spec's ``x0``, else the nominal scenario, which lies inside the
-    bounds (the paper's ``x0 = 0`` lay outside them, so repair piled the first batches on edges)."""
+    """The emitters' start: the spec's ``x0``, else the centre of the bounds (the paper's ``x0 = 0``
+    lay outside them, so repair piled the first batches on their edges)."""
     given = domain.spec.search.emitter.x0
-    return np.array(given, dtype=float) if given is not None else np.asarray(domain.nominal, dtype=float)
+    return np.array(given, dtype=float) if given is not None else (domain.space.lower + domain.space.upper) / 2
 
 
 def sigma0(domain: Domain) -> float:

@@ -329,7 +329,7 @@ class EmitterSettings(Strict):
     sigma0: PositiveFloat | None = Field(
         None, description="CMA-ES step in theta's units; default: a sixth of the bounds' typical width"
     )
-    x0: list[Number] | None = Field(None, description="default: the nominal scenario (inside the bounds)")
+    x0: list[Number] | None = Field(None, description="default: the centre of the bounds")
     learning_rate: Number = Field(0.1, gt=0, le=1, description="archive learning rate alpha")
     threshold_min: Number = 0.0
     gradient_lr: PositiveFloat = Field(1.0, description="DSAS gradient-ascent step")
