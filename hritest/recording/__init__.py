@@ -27,6 +27,10 @@ is escaped. Entities:
 ``scenario``                    objective, measures, metrics and theta (static document)
 ==============================  =======================================================
 
+A recording of several episodes (a failure beside the nearest scenario that passes,
+:func:`write_episodes`) puts each under its name, ``<episode>/world/...`` and so on, on one
+timeline.
+
 Bodies and trajectories are placed in the ``world`` frame explicitly (``parent_frame`` and
 ``CoordinateFrame``), not through the entity tree: a body ``arm/link3`` or a trajectory
 ``robot/ee`` must not inherit the pose of a body called ``arm`` or ``robot``.
@@ -34,17 +38,19 @@ Bodies and trajectories are placed in the ``world`` frame explicitly (``parent_f
 
 from hritest.recording.entities import APPLICATION_ID, TIMELINE, WORLD_FRAME
 from hritest.recording.files import RecordingError, check_writable, open_viewer, recorded_entities, recording_ids
-from hritest.recording.write import grid_image, write_recording
+from hritest.recording.write import Episode, grid_image, write_episodes, write_recording
 
 __all__ = [
     "APPLICATION_ID",
     "TIMELINE",
     "WORLD_FRAME",
+    "Episode",
     "RecordingError",
     "check_writable",
     "grid_image",
     "open_viewer",
     "recorded_entities",
     "recording_ids",
+    "write_episodes",
     "write_recording",
 ]

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from hritest.errors import HritestError
-from hritest.recording.entities import TIMELINE, WORLD_FRAME, entity_path
+from hritest.recording.entities import TIMELINE, entity_path, under, world_frame
 
 _STILL = 1e-9  # a body whose pose never changes more than this (m, quaternion units) is static
 _PLANE_HALF = 5.0  # m: MuJoCo draws a plane of size 0 without end; a recording needs an edge
@@ -65,7 +65,7 @@ def geom_centres(scene: ReplayedScene) -> np.ndarray:
     return np.concatenate([np.zeros((0, 3)), *centres])
 
 
-def log_scene(rec: Any, scene: ReplayedScene) -> None:
+def log_scene(rec: Any, scene: ReplayedScene, *, episode: str = "") -> None:
     """Each body's geoms once, in its frame, and its pose: per tick only if it ever moves."""
     import rerun as rr
 
@@ -74,7 +74,7 @@ def log_scene(rec: Any, scene: ReplayedScene) -> None:
         geoms[geom.body].append(geom)
     time = rr.TimeColumn(TIMELINE, duration=scene.time)
     for i, body in enumerate(scene.bodies):
-        entity = entity_path("world", body)
+        entity = entity_path(under(episode, "world"), body)
         shapes = _shapes(geoms[body])
         if shapes:
             rec.log(f"{entity}/geoms", *shapes, static=True)
@@ -85,14 +85,14 @@ def log_scene(rec: Any, scene: ReplayedScene) -> None:
                 entity,
                 indexes=[time],
                 columns=rr.Transform3D.columns(
-                    translation=positions, quaternion=xyzw, parent_frame=[WORLD_FRAME] * len(positions)
+                    translation=positions, quaternion=xyzw, parent_frame=[world_frame(episode)] * len(positions)
                 ),
             )
         else:
             rec.log(
                 entity,
                 rr.Transform3D(
-                    translation=positions[0], quaternion=rr.Quaternion(xyzw=xyzw[0]), parent_frame=WORLD_FRAME
+                    translation=positions[0], quaternion=rr.Quaternion(xyzw=xyzw[0]), parent_frame=world_frame(episode)
                 ),
                 static=True,
             )

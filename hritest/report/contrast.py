@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from hritest.records import EvaluationRecord
@@ -21,6 +22,7 @@ class Contrast:
 
     failure: EvaluationRecord
     passing: dict[str, Any] | None
+    recording: Path | None = None  # both episodes side by side, on one timeline
     changed: tuple[str, ...] = ()
     distance: float = float("nan")
     evaluations: int = 0
@@ -49,6 +51,7 @@ def contrast(data: RunData, failure: EvaluationRecord, *, search: bool = True, b
             stored = {"digest": digest, "reason": str(exc)}
         else:
             passing = found.passing
+            _record(domain, data, failure, found, path.with_suffix(".rrd"))
             stored = {
                 "digest": digest,
                 "passing": {
@@ -64,11 +67,27 @@ def contrast(data: RunData, failure: EvaluationRecord, *, search: bool = True, b
             }
         path.parent.mkdir(exist_ok=True)
         atomic_write(path, json.dumps(stored, indent=1))
+    recording = path.with_suffix(".rrd")
     return Contrast(
         failure=failure,
         passing=stored.get("passing"),
+        recording=recording if stored.get("passing") and recording.is_file() else None,
         changed=tuple(stored.get("changed", ())),
         distance=float(stored.get("distance", float("nan"))),
         evaluations=int(stored.get("evaluations", 0)),
         reason=stored.get("reason", ""),
     )
+
+
+def _record(domain: Any, data: RunData, failure: EvaluationRecord, found: Any, path: Path) -> None:
+    """The failure and its counterfactual simulated again with their rollouts, into one recording."""
+    from hritest.evaluate import evaluate_with_rollout
+    from hritest.recording import Episode, write_episodes
+    from hritest.replay import scenario_digest
+
+    episodes = []
+    for name, theta in (("failure", failure.theta), ("passing", found.theta)):
+        evaluation, rollout = evaluate_with_rollout(domain, theta, seed=failure.seed)
+        episodes.append(Episode(name, evaluation, rollout, f"{data.spec.name}: failure {failure.index}, {name}"))
+    digest = scenario_digest(data.meta["spec_digest"], found.theta, failure.seed)
+    write_episodes(path, domain=domain, episodes=episodes, recording_id=f"counterfactual-{digest}")

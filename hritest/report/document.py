@@ -90,7 +90,7 @@ def run_document(
         )
         sections.append(Section("Why they fail", _clause_blocks(data, recorded, link_base)))
         if contrast is not None:
-            sections.append(Section("What would have passed", _contrast_blocks(data, contrast)))
+            sections.append(Section("What would have passed", _contrast_blocks(data, contrast, link_base)))
         sections.append(
             Section(
                 f"Kinds of failure ({len(data.clusters)})",
@@ -307,7 +307,7 @@ def _clause_blocks(data: RunData, recorded: Mapping[int, Recorded], link_base: P
     ]
 
 
-def _contrast_blocks(data: RunData, contrast: Contrast) -> list:
+def _contrast_blocks(data: RunData, contrast: Contrast, link_base: Path) -> list:
     """The first kind's representative beside the nearest passing scenario found."""
     failure, passing = contrast.failure, contrast.passing
     if passing is None:
@@ -331,7 +331,11 @@ def _contrast_blocks(data: RunData, contrast: Contrast) -> list:
     rows += [[m, _fmt(a), _fmt(b)] for m, a, b in zip(data.measure_names, failure.measures, passing["measures"])]
     rows += [[k, _fmt(v), _fmt(passing["metrics"].get(k, math.nan))] for k, v in failure.metrics.items()]
     outcome = Table(["", "failure", "passing"], rows, caption="Outcome and every metric")
-    return [intro, parameters, outcome]
+    blocks = [intro, parameters, outcome]
+    if contrast.recording is not None:
+        link = Link(contrast.recording.name, os.path.relpath(contrast.recording, link_base))
+        blocks.append(Table(["both episodes, side by side on one timeline (Rerun)"], [[link]]))
+    return blocks
 
 
 def _replay_note(data: RunData, recorded: Mapping[int, Recorded]) -> str:

@@ -16,6 +16,7 @@ from typer.testing import CliRunner
 
 from hritest import search as qd
 from hritest.cli import app
+from hritest.recording import recorded_entities
 from hritest.records import Clause, EvaluationRecord, Status, rank_failures, worst_of_each_clause
 from hritest.report import chosen_failures, cluster_failures, load_run, worst_failures, write_report
 from hritest.rundir import RunDirectory
@@ -268,6 +269,10 @@ def test_the_largest_kinds_failure_is_shown_beside_the_nearest_passing_scenario(
     stored = json.loads((run / "counterfactuals" / f"{representative.index}.json").read_text())
     assert "What would have passed" in page and f"Failure {representative.index}, the representative" in page
     assert stored["changed"] and stored["passing"]["objective"] < 8  # the toy's failure condition: objective >= 8
+    pair = run / "counterfactuals" / f"{representative.index}.rrd"
+    entities = recorded_entities(pair)
+    assert {"failure/world/robot", "passing/world/robot", "failure/scenario", "passing/scenario"} <= set(entities)
+    assert f'href="../counterfactuals/{pair.name}"' in page
     made = (run / "counterfactuals" / f"{representative.index}.json").stat().st_mtime_ns
     write_report(run, recordings=2)  # a second report reads it back
     assert (run / "counterfactuals" / f"{representative.index}.json").stat().st_mtime_ns == made
