@@ -24,8 +24,8 @@ import mujoco
 import numpy as np
 from numpy.typing import ArrayLike
 
-from hritest.jit import kernel
 from hritest.errors import HritestError
+from hritest.jit import kernel
 from hritest.sim.control import twist_to_joint_velocity
 from hritest.sim.layout import SceneTrace, WorldLayout
 from hritest.sim.mjcf import _HAND, _OBJECT_PREFIX, WorldModelError, _Arm, _body_id, _build, _start
