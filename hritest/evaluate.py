@@ -48,7 +48,9 @@ def evaluate_with_rollout(domain: Domain, theta: np.ndarray, *, seed: int = 0) -
         scenario = domain.space.bind(repaired.theta)
         try:
             rollout = simulate(domain, scenario, seed=seed)
-        except Exception as exc:
+        # A plugin's sys.exit() or KeyboardInterrupt ends its scenario, not the caller: a real
+        # Ctrl-C reaches hritest's commands as hritest.interrupt.Interrupted, which passes through.
+        except (Exception, SystemExit, KeyboardInterrupt) as exc:
             evaluation = Evaluation(**base, status=Status.PLUGIN_ERROR, message=_blame(domain, exc))
         else:
             evaluation = _score(domain, scenario, rollout, base)

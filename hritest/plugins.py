@@ -69,7 +69,12 @@ def _import(module_ref: str, base: Path | None):  # noqa: ANN202 - a module
         return importlib.import_module(module_ref)
     except PluginError:
         raise
-    except Exception as exc:
+    except SystemExit as exc:  # would end hritest itself, as if it had succeeded
+        raise PluginError(
+            f"plugin module {module_ref!r} called sys.exit({exc.code!r}) while being imported; a plugin "
+            "module must only define its classes (move that code under 'if __name__ == \"__main__\":')"
+        ) from None
+    except (Exception, KeyboardInterrupt) as exc:
         last = traceback.format_exception_only(exc)[-1].strip()
         raise PluginError(f"plugin module {module_ref!r} does not import: {last}") from exc
 

@@ -12,8 +12,10 @@ scenario that kills its worker cannot take its neighbours' retries with it.
 from __future__ import annotations
 
 import concurrent.futures as cf
+import ctypes
 import os
 import signal
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterable
@@ -24,8 +26,11 @@ from pathlib import Path
 
 import numpy as np
 
+from hritest import interrupt
 from hritest.evaluate import evaluate
 from hritest.records import Evaluation, Status
+
+PR_SET_PDEATHSIG = 1  # from <sys/prctl.h>
 
 
 @dataclass(frozen=True)
@@ -62,8 +67,11 @@ def _domain(ref: DomainRef):  # noqa: ANN202 - a Domain
 
 
 def worker_init() -> None:
-    """One thread per worker: the pool already uses every core."""
+    """One thread per worker (the pool already uses every core); Ctrl-C is the parent's to handle,
+    and a worker dies with its parent, however the parent ends (even by SIGKILL)."""
     os.environ.setdefault("OMP_NUM_THREADS", "1")
+    interrupt.ignore_in_worker()
+    _die_with_parent()
     try:
         import torch
 
@@ -91,6 +99,20 @@ def run_job(ref: DomainRef, job: Job, timeout: float) -> Evaluation:
 
 def _raise_timeout(signum, frame) -> None:  # noqa: ANN001
     raise EvaluationTimeout
+
+
+def _die_with_parent() -> None:
+    """Asks Linux to SIGKILL this process when its parent dies (elsewhere, a no-op: there the
+    parent's own shutdown is all that stops its workers)."""
+    if not sys.platform.startswith("linux"):
+        return
+    parent = os.getppid()
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != parent:  # the parent died before the request took effect
+        os._exit(1)
 
 
 def _failed(job: Job, status: Status, message: str) -> Evaluation:
@@ -140,7 +162,18 @@ class Evaluator:
         self.on_close()
 
     def run(self, jobs: Iterable[Job], on_result: Callable[[Job, Evaluation], None]) -> None:
-        """Evaluates every job, calling ``on_result`` for each as it finishes (in any order)."""
+        """Evaluates every job, calling ``on_result`` for each as it finishes (in any order).
+
+        If anything stops it (an interrupt, an error in ``on_result``), the jobs in flight are
+        abandoned and the local pool's workers killed, so that none outlives the search.
+        """
+        try:
+            self._run(jobs, on_result)
+        except BaseException:
+            self._kill_workers()
+            raise
+
+    def _run(self, jobs: Iterable[Job], on_result: Callable[[Job, Evaluation], None]) -> None:
         queue = list(jobs)[::-1]  # pop() takes them in order
         suspects: list[Job] = []  # jobs in flight when a worker died: rerun one at a time
         attempts: dict[int, int] = {}
@@ -252,10 +285,17 @@ class Evaluator:
             return False
         if all(time.monotonic() - started < self._hard_limit for _, started in running.values()):
             return False
-        # ProcessPoolExecutor has no public way to stop a worker that ignores signals (C code stuck).
-        for process in getattr(self.executor, "_processes", {}).values():
-            process.kill()
+        self._kill_workers()
         return True
+
+    def _kill_workers(self) -> None:
+        """Kills the local pool's workers (a Dask executor's belong to the cluster: they stay)."""
+        # ProcessPoolExecutor has no public way to stop a worker that ignores signals (C code stuck).
+        processes = list((getattr(self.executor, "_processes", None) or {}).values())
+        for process in processes:
+            process.kill()
+        for process in processes:
+            process.join(timeout=5)
 
 
 def _shutdown(executor: cf.Executor) -> None:
