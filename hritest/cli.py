@@ -580,6 +580,7 @@ def _print_replay(result) -> None:  # noqa: ANN001 - hritest.replay.Replay
         f"compared: status and failure verdict exactly; objective and measures within {result.tolerance:g} absolute",
         highlight=False,
     )
+    out.print(result.why, markup=False, highlight=False)
     verdict = "[green]replay matches[/green]" if result.matches else "[red]replay does NOT match[/red]"
     out.print(f"{verdict} (scenario digest {result.digest[:16]})")
 

@@ -4,14 +4,18 @@ Layout: ``<corpus>/<spec name>/<scenario digest[:12]>.yaml``, one file per failu
 
     # hritest failure corpus entry (replayed by pytest). Change `status` by hand or with
     # `hritest promote --mark-fixed ID`; edit nothing else.
-    format: 1
+    format: 2
     status: open                # open: still a failure (xfail); fixed: must not fail (regression)
     spec: ../../../specs/teleop.yaml   # relative to this file
     spec_name: teleop
     spec_digest: 4d3d387f...    # sha256 of the spec file's bytes when it was recorded
+    outcome_digest: 9b1e22c0... # what decides the outcome (hritest.outcome_digest), and its parts:
+    outcome_parts: {scenario space: 51c0..., task plugin source: 0e4f..., failure condition: 77aa..., ...}
     failure_condition: objective >= 10
     seed: 3344922676
+    seconds: 0.41               # how long its evaluation took (the default replay timeout grows with it)
     objective: 10.0
+    why: ['objective >= 10 (objective=10)']   # the failure condition's clauses that held
     measures: {goal_distance: 0.045, variation: 0.077}
     theta: {g0x: 0.588, ...}          # raw, as the search proposed it (what a replay evaluates)
     theta_repaired: {g0x: 0.588, ...}
@@ -20,6 +24,8 @@ Layout: ``<corpus>/<spec name>/<scenario digest[:12]>.yaml``, one file per failu
     versions: {hritest: 0.1.0, mujoco: 4.0.0, ...}
     origin: {run: /abs/runs/teleop-..., evaluation: 33, promoted: '2026-...'}
 
+Format 1 files (no outcome digest, no ``why``, no ``seconds``) still load and replay.
+
 This module reads and writes entries with the standard library and PyYAML only, so that the
 pytest plugin can collect a corpus without importing the simulator; :func:`promote` (the CLI's)
 imports the heavy modules when it runs.
@@ -27,9 +33,12 @@ imports the heavy modules when it runs.
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 import os
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -37,7 +46,9 @@ from typing import Any
 
 from hritest.errors import HritestError
 
-FORMAT = 1
+FORMAT = 2
+FORMATS = (1, 2)  # the formats this hritest reads
+SUFFIX = ".yaml"
 DEFAULT_CORPUS = Path("tests") / "hri_failures"
 STATUSES = ("open", "fixed")
 HEADER = (
@@ -70,8 +81,13 @@ class Entry:
     theta: dict[str, float]
     theta_repaired: dict[str, float]
     metrics: dict[str, float | None]
+    scenario_digest: str
     failure_condition: str = ""
-    scenario_digest: str = ""
+    format: int = FORMAT
+    outcome_digest: str = ""  # empty in format 1
+    outcome_parts: dict[str, str] | None = None
+    why: tuple[str, ...] = ()  # the clauses that held when it was recorded
+    seconds: float | None = None
     versions: dict[str, Any] | None = None
     origin: dict[str, Any] | None = None
 
@@ -118,7 +134,31 @@ def _configured_corpus(pyproject: Path) -> str | None:
 def entry_files(corpus: Path) -> list[Path]:
     """Every entry file of the corpus (``<spec>/<id>.yaml``), sorted."""
     corpus = Path(corpus)
-    return sorted(corpus.glob("*/*.yaml")) if corpus.is_dir() else []
+    return sorted(corpus.glob(f"*/*{SUFFIX}")) if corpus.is_dir() else []
+
+
+def misplaced(corpus: Path, path: Path) -> str:
+    """Why a YAML file under ``corpus`` is not where an entry lives (``<corpus>/<spec>/<id>.yaml``), or ``""``.
+
+    A file that looks like an entry but would not be replayed is an error, never silently ignored.
+    """
+    path, corpus = Path(path).resolve(), Path(corpus).resolve()
+    if path.suffix == ".yml":
+        return f"{path}: corpus entries are named <id>.yaml; rename it to {path.with_suffix(SUFFIX).name}"
+    if path.parent == corpus:
+        return (
+            f"{path}: corpus entries live in a folder per spec, <corpus>/<spec name>/<id>.yaml; move it into "
+            f"{corpus}/<its spec_name>/"
+        )
+    if path.parent.parent != corpus:
+        return f"{path}: corpus entries live at <corpus>/<spec name>/<id>.yaml, one folder deep; move it to {corpus}/"
+    return ""
+
+
+def scenario_digest(spec_digest: str, theta_repaired: Sequence[float], seed: int) -> str:
+    """sha256 of the spec digest, the repaired theta and the seed: one scenario's identity."""
+    payload = json.dumps([spec_digest, [float(v) for v in theta_repaired], int(seed)], separators=(",", ":"))
+    return hashlib.sha256(payload.encode()).hexdigest()
 
 
 # --- reading -----------------------------------------------------------------------------------
@@ -145,8 +185,9 @@ def load_entry(path: Path) -> Entry:
     if not isinstance(data, dict):
         raise CorpusError(f"{path}: a corpus entry is a YAML mapping of fields, got {type(data).__name__}")
     field = _Fields(path, data)
-    if data.get("format", FORMAT) != FORMAT:
-        raise field.bad("format", f"this hritest reads corpus format {FORMAT}")
+    version = data.get("format", 1)
+    if version not in FORMATS:
+        raise field.bad("format", f"this hritest reads corpus formats {', '.join(map(str, FORMATS))}")
     status = field.text("status")
     if status not in STATUSES:
         raise field.bad("status", "must be 'open' or 'fixed'")
@@ -157,6 +198,22 @@ def load_entry(path: Path) -> Entry:
     repaired = field.numbers("theta_repaired")
     if list(theta) != list(repaired):
         raise field.bad("theta_repaired", f"must have the same labels as theta ({', '.join(theta)})")
+    seed = field.integer("seed")
+    scenario = field.text("scenario_digest")
+    if scenario != scenario_digest(digest, repaired.values(), seed):
+        raise field.bad(
+            "scenario_digest",
+            "does not match the fields 'spec_digest', 'theta_repaired' and 'seed': one of them was edited; "
+            "restore the file from version control, or promote the failure again",
+        )
+    if not scenario.startswith(path.stem):
+        raise field.bad("scenario_digest", f"must start with the file's name ({path.stem}); was the file renamed?")
+    outcome_parts = field.mapping("outcome_parts") if version >= 2 else None
+    if version >= 2 and not outcome_parts:
+        raise field.bad("outcome_parts", "must be a mapping of outcome parts to digests (format 2)")
+    why = data.get("why") or []
+    if not isinstance(why, list) or not all(isinstance(w, str) for w in why):
+        raise field.bad("why", "must be a list of the clauses that held, as text")
     return Entry(
         path=path,
         id=path.stem,
@@ -164,14 +221,19 @@ def load_entry(path: Path) -> Entry:
         spec=field.text("spec"),
         spec_name=field.text("spec_name"),
         spec_digest=digest,
-        seed=field.integer("seed"),
+        seed=seed,
         objective=field.number("objective"),
         measures=field.numbers("measures"),
         theta=theta,
         theta_repaired=repaired,
         metrics=field.numbers("metrics", required=False, nullable=True),
+        scenario_digest=scenario,
         failure_condition=str(data.get("failure_condition") or ""),
-        scenario_digest=str(data.get("scenario_digest") or ""),
+        format=version,
+        outcome_digest=field.text("outcome_digest") if version >= 2 else "",
+        outcome_parts=None if outcome_parts is None else {str(k): str(v) for k, v in outcome_parts.items()},
+        why=tuple(why),
+        seconds=field.number("seconds") if "seconds" in data else None,
         versions=field.mapping("versions"),
         origin=field.mapping("origin"),
     )
@@ -268,7 +330,8 @@ class Promoted:
 
 
 def promote(run_path: Path, *, corpus: Path, top: int | None = None) -> list[Promoted]:
-    """Copies the ``top`` worst failures of a run (all by default) into the corpus.
+    """Copies ``top`` failures of a run (all by default) into the corpus: the worst failure of each
+    clause of the failure condition that fired, then the worst of the rest (:func:`chosen`).
 
     Idempotent: a failure already in the corpus (same scenario digest) is left untouched.
 
@@ -277,6 +340,7 @@ def promote(run_path: Path, *, corpus: Path, top: int | None = None) -> list[Pro
         CorpusError: the spec changed since the run, or the corpus folder cannot be written.
     """
     from hritest import replay
+    from hritest.outcome_digest import outcome_digest
     from hritest.rundir import RunDirectory, atomic_write, digest
 
     run = RunDirectory.open(run_path)
@@ -293,18 +357,18 @@ def promote(run_path: Path, *, corpus: Path, top: int | None = None) -> list[Pro
             "stale at once; run a new search with the current spec and promote from that"
         )
     records = {r.index: r for r in run.evaluations()}
-    ids = replay.failure_ids(run, list(records.values()))
-    chosen = ids if top is None else ids[:top]
-    if not chosen:
+    ids = chosen([records[i] for i in replay.failure_ids(run, list(records.values()))], top)
+    if not ids:
         return []
     domain = replay.run_domain(run)
+    outcome = outcome_digest(domain)
     labels = domain.space.labels
     folder = Path(corpus) / domain.spec.name
     _writable(folder)
     done = []
-    for index in chosen:
+    for index in ids:
         record = records[index]
-        scenario = replay.scenario_digest(spec_digest, record.theta_repaired, record.seed)
+        scenario = scenario_digest(spec_digest, record.theta_repaired, record.seed)
         path = folder / f"{scenario[:12]}.yaml"
         added = not path.exists()
         if added:
@@ -314,8 +378,11 @@ def promote(run_path: Path, *, corpus: Path, top: int | None = None) -> list[Pro
                 "spec": os.path.relpath(spec_file.resolve(), folder.resolve()),
                 "spec_name": domain.spec.name,
                 "spec_digest": spec_digest,
+                "outcome_digest": outcome.digest,
+                "outcome_parts": dict(outcome.parts),
                 "failure_condition": domain.spec.failure,
                 "seed": record.seed,
+                "seconds": round(record.seconds, 3),
                 "objective": record.objective,
                 "why": [str(c) for c in record.fired],
                 "measures": {m.name: v for m, v in zip(domain.measures, record.measures)},
@@ -339,11 +406,24 @@ def promote(run_path: Path, *, corpus: Path, top: int | None = None) -> list[Pro
     return done
 
 
+def chosen(failures: Sequence[Any], top: int | None) -> list[int]:
+    """The ids of ``top`` failures (all when None): the worst of each failure clause that fired first,
+    so that a safety clause with low objectives is kept too, then the rest in the one failure ranking
+    (:func:`hritest.records.rank_failures`)."""
+    from hritest.records import rank_failures, worst_of_each_clause
+
+    ranked = rank_failures(failures)
+    order = list(dict.fromkeys([r.index for r in worst_of_each_clause(ranked).values()] + [r.index for r in ranked]))
+    return order if top is None else order[:top]
+
+
 def _writable(folder: Path) -> None:
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise CorpusError(f"cannot create the corpus folder {folder} ({exc.strerror}); choose another with --to")
+        raise CorpusError(
+            f"cannot create the corpus folder {folder} ({exc.strerror}); choose another with --to"
+        ) from None
     if not os.access(folder, os.W_OK | os.X_OK):
         raise CorpusError(f"the corpus folder {folder} is not writable; choose another with --to")
 

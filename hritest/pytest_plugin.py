@@ -6,18 +6,22 @@ every project where hritest is installed. It therefore imports only the standard
 time a corpus entry (or the ``hri_scenario`` fixture) actually runs.
 
 Each corpus file ``<corpus>/<spec>/<id>.yaml`` becomes one test, ``<file>::<spec>::<id>``, that
-re-simulates the stored scenario with the current plugins and judges it by the spec's failure
-condition:
+re-simulates the stored scenario with the current plugins, in a worker process with a time limit
+(:mod:`hritest.corpus_worker`), and is judged by :func:`hritest.verdict.judge`. This module only
+maps verdicts to pytest outcomes:
 
-=========================  =================================  ===================
-entry status               the scenario now                   reported as
-=========================  =================================  ===================
-``fixed``                  still passes                       passed
-``fixed``                  fails again                        FAILED (regression)
-``open``                   still fails                        xfailed
-``open``                   passes                             XPASS (now passing)
-either                     spec changed since it was stored   skipped (stale)
-=========================  =================================  ===================
+=================  ==========================================
+verdict            reported as
+=================  ==========================================
+passing            passed
+regression         FAILED
+still failing      xfailed
+flaky              xfailed, with its failure rate
+now passing        XPASS
+error              FAILED (never a pass or a skip)
+=================  ==========================================
+
+An entry is replayed whatever changed since it was recorded; what changed is shown beside its verdict.
 """
 
 from __future__ import annotations
@@ -32,10 +36,12 @@ import pytest
 from hritest import corpus as hc
 from hritest.errors import HritestError
 
-OUTCOMES = ("regression", "still failing", "now passing", "stale", "passing", "error", "search with new failures")
+# The summary's order; the first four are always counted.
+OUTCOMES = ("regression", "still failing", "now passing", "flaky", "passing", "error", "search with new failures")
 
 _corpus_key = pytest.StashKey[Path]()
 _domains_key = pytest.StashKey[dict]()
+_worker_key = pytest.StashKey[Any]()
 
 
 # --- options, configuration, header --------------------------------------------------------------
@@ -64,6 +70,28 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         help="set status: fixed in the corpus files of open failures that no longer fail",
     )
     group.addoption(
+        "--hri-replays",
+        metavar="N",
+        type=int,
+        default=1,
+        help="replay each entry with N seeds, the recorded one first; an open entry that fails with only "
+        "some is reported as flaky, a fixed one that fails with any is a regression",
+    )
+    group.addoption(
+        "--hri-timeout",
+        metavar="S",
+        type=float,
+        default=None,
+        help="the time limit of one replay in seconds (default: 5 x the seconds the entry recorded + 30); "
+        "an entry that takes longer fails",
+    )
+    group.addoption(
+        "--hri-allow-outside",
+        action="store_true",
+        default=False,
+        help="replay entries whose spec lies outside the rootdir (compiling it runs the plugins it names)",
+    )
+    group.addoption(
         "--hri-search-budget",
         metavar="N",
         type=int,
@@ -78,10 +106,20 @@ def pytest_configure(config: pytest.Config) -> None:
         "markers", "hri: a hritest scenario test (a failure corpus entry or a test using the hri_scenario fixture)"
     )
     given = config.getoption("hri_corpus", None)
+    replays, timeout = config.getoption("hri_replays", 1), config.getoption("hri_timeout", None)
+    if replays < 1:
+        raise pytest.UsageError(f"--hri-replays must be 1 or more, got {replays}")
+    if timeout is not None and not 0 < timeout < float("inf"):
+        raise pytest.UsageError(f"--hri-timeout must be a positive number of seconds, got {timeout}")
     try:
         corpus = (config.rootpath / given) if given else hc.default_corpus(config.rootpath)
     except hc.CorpusError as exc:
         raise pytest.UsageError(str(exc)) from None
+    if given and not corpus.is_dir():
+        raise pytest.UsageError(
+            f"--hri-corpus {given}: {corpus} is not a folder (the path is relative to the rootdir "
+            f"{config.rootpath}); give the folder that holds <spec>/<id>.yaml entries"
+        )
     config.stash[_corpus_key] = corpus = corpus.resolve()
     config.stash[_domains_key] = {}
     config.pluginmanager.register(_Summary(config), "hritest-summary")
@@ -98,6 +136,12 @@ def _covered(corpus: Path, config: pytest.Config) -> bool:
         if path == corpus or path in corpus.parents:
             return True
     return False
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    worker = config.stash.get(_worker_key, None)
+    if worker is not None:
+        worker.close()
 
 
 def pytest_report_header(config: pytest.Config) -> str | None:
@@ -120,15 +164,18 @@ def _shown(path: Path, config: pytest.Config) -> str:
 
 def pytest_collect_file(file_path: Path, parent: pytest.Collector) -> pytest.Collector | None:
     corpus = parent.config.stash.get(_corpus_key, None)
-    if corpus is not None and file_path.suffix == ".yaml" and file_path.resolve().parent.parent == corpus:
+    if corpus is not None and file_path.suffix in (".yaml", ".yml") and corpus in file_path.resolve().parents:
         return CorpusFile.from_parent(parent, path=file_path)
     return None
 
 
 class CorpusFile(pytest.File):
-    """One corpus file; a malformed one is a collection error naming the file and the field."""
+    """One corpus file; a malformed or misplaced one is a collection error naming the file and the field."""
 
     def collect(self) -> Iterator[pytest.Collector]:
+        misplaced = hc.misplaced(self.config.stash[_corpus_key], self.path)
+        if misplaced:
+            raise self.CollectError(f"hritest corpus: {misplaced}")
         try:
             entry = hc.load_entry(self.path)
         except hc.CorpusError as exc:
@@ -147,7 +194,7 @@ class CorpusSpec(pytest.Collector):
         yield CorpusItem.from_parent(self, name=self.entry.id, entry=self.entry)
 
 
-class HriRegression(Exception):
+class HriFailure(Exception):  # noqa: N818 - a test failure, reported as one
     """A failure marked fixed that fails again (or an entry that no longer evaluates)."""
 
 
@@ -162,44 +209,46 @@ class CorpusItem(pytest.Item):
         self.hri_section = ""  # the report's "hritest" section
 
     def runtest(self) -> None:
-        entry = self.entry
+        from hritest.corpus_worker import replay_entry
+        from hritest.verdict import Verdict
+
+        entry, config = self.entry, self.config
         self.user_properties.append(("hri_entry", f"{entry.spec_name}/{entry.id}"))
-        stale = _stale_reason(entry, self.config)
-        if stale:
-            self._set("stale", stale)
-            pytest.skip(f"hritest stale: {stale}")
-        domain = _domain(self.config, entry.spec_path)
-        replayed = _replay(domain, entry)
-        evaluation = replayed.evaluation
-        then_now = _then_now(replayed)
-        if not evaluation.ok:
-            self._set("error", f"the scenario no longer evaluates: status {evaluation.status}")
-            raise HriRegression(
-                f"{self._title()} no longer evaluates: status {evaluation.status}\n{evaluation.message}\n{then_now}"
-            )
-        condition = domain.spec.failure
-        if evaluation.failure and entry.status == "fixed":
-            self._set("regression", "")
-            raise HriRegression(f"{self._title()} was marked fixed but fails again: '{condition}' holds\n{then_now}")
-        if evaluation.failure:
-            self._set("still failing", then_now)
-            pytest.xfail(
-                f"hritest open failure still fails: '{condition}' holds "
-                f"(objective {evaluation.objective:.6g}, recorded {entry.objective:.6g})"
-            )
-        if entry.status == "fixed":
-            self._set("passing", "")
+        judged = replay_entry(
+            entry,
+            worker=_worker(config),
+            replays=config.getoption("hri_replays"),
+            timeout=config.getoption("hri_timeout"),
+            project=None if config.getoption("hri_allow_outside") else config.rootpath,
+        )
+        verdict, changed = judged.verdict, (f" {judged.changed}" if judged.changes else "")
+        if judged.changes:
+            self.user_properties.append(("hri_changes", ", ".join(judged.changes)))
+        if judged.failure_rate is not None and verdict is Verdict.FLAKY:
+            self.user_properties.append(("hri_failure_rate", f"{judged.failure_rate:.0%}"))
+        if verdict is Verdict.ERROR:
+            self._set(verdict, "")
+            raise HriFailure(f"{self._title()} cannot be replayed: {judged.reason}{changed}")
+        if verdict is Verdict.REGRESSION:
+            self._set(verdict, "")
+            raise HriFailure(f"{self._title()} {judged.reason}{changed}\n{judged.detail}")
+        if verdict in (Verdict.STILL_FAILING, Verdict.FLAKY):
+            self._set(verdict, judged.detail)
+            rate = f" (flaky: fails {judged.failure_rate:.0%} of its replays)" if verdict is Verdict.FLAKY else ""
+            pytest.xfail(f"hritest open failure{rate} {judged.reason}{changed}")
+        if verdict is Verdict.PASSING:
+            self._set(verdict, judged.changed)
             return
-        text = f"open failure {entry.spec_name}/{entry.id} no longer fails: '{condition}' does not hold\n{then_now}\n"
-        if self.config.getoption("hri_mark_fixed"):
+        text = f"open failure {entry.spec_name}/{entry.id} {judged.reason}{changed}\n{judged.detail}\n"
+        if config.getoption("hri_mark_fixed"):
             hc.set_status(entry.path, "fixed")
             text += f"marked fixed in {entry.path} (--hri-mark-fixed)"
         else:
             text += (
-                f"mark it fixed: hritest promote --to {_shown(entry.path.parent.parent, self.config)} "
+                f"mark it fixed: hritest promote --to {_shown(entry.path.parent.parent, config)} "
                 f"--mark-fixed {entry.spec_name}/{entry.id}   (or run pytest with --hri-mark-fixed)"
             )
-        self._set("now passing", text)
+        self._set(verdict, text)
 
     def _set(self, outcome: str, section: str) -> None:
         self.hri_outcome, self.hri_section = outcome, section
@@ -209,7 +258,7 @@ class CorpusItem(pytest.Item):
         return f"hritest {self.entry.spec_name}/{self.entry.id}"
 
     def repr_failure(self, excinfo: pytest.ExceptionInfo[BaseException], style: Any = None) -> Any:
-        if isinstance(excinfo.value, HriRegression):
+        if isinstance(excinfo.value, HriFailure):
             entry = self.entry
             theta = ",".join(repr(v) for v in entry.theta.values())
             return (
@@ -311,7 +360,7 @@ class SearchItem(pytest.Item):
                 + "  ".join(f"{n} {v:.4g}" for n, v in zip(names, r["measures"]))
                 for d, r in new
             ]
-            raise HriRegression(
+            raise HriFailure(
                 f"a Random search of {self.budget} evaluations found {len(new)} failure(s) of {self.spec_name} "
                 f"that the corpus does not hold:\n"
                 + "\n".join(lines)
@@ -320,7 +369,7 @@ class SearchItem(pytest.Item):
             )
 
     def repr_failure(self, excinfo: pytest.ExceptionInfo[BaseException], style: Any = None) -> Any:
-        if isinstance(excinfo.value, HriRegression | HritestError):
+        if isinstance(excinfo.value, HriFailure | HritestError):
             return str(excinfo.value)
         return super().repr_failure(excinfo)
 
@@ -341,19 +390,16 @@ def _search_folder(config: pytest.Config) -> Path:
 # --- replay -------------------------------------------------------------------------------------
 
 
-def _stale_reason(entry: hc.Entry, config: pytest.Config) -> str:
-    from hritest.rundir import digest
+def _worker(config: pytest.Config) -> Any:
+    """The session's replay worker (:class:`hritest.corpus_worker.ReplayWorker`), closed at the end."""
+    worker = config.stash.get(_worker_key, None)
+    if worker is None:
+        import sys
 
-    spec, path = _shown(entry.spec_path, config), _shown(entry.path, config)
-    if not entry.spec_path.is_file():
-        return f"its spec {spec} no longer exists; restore it, or delete {path}"
-    now = digest(entry.spec_path)
-    if now != entry.spec_digest:
-        return (
-            f"{spec} changed since {entry.spec_name}/{entry.id} was recorded (spec digest "
-            f"{entry.spec_digest[:12]} then, {now[:12]} now); search again and promote, or delete {path}"
-        )
-    return ""
+        from hritest.corpus_worker import ReplayWorker
+
+        worker = config.stash[_worker_key] = ReplayWorker(cwd=config.rootpath, pythonpath=[p for p in sys.path if p])
+    return worker
 
 
 def _domain(config: pytest.Config, spec: Path) -> Any:
@@ -373,50 +419,12 @@ def _domain(config: pytest.Config, spec: Path) -> Any:
     return found
 
 
-def _replay(domain: Any, entry: hc.Entry) -> Any:
-    from hritest.replay import replay_outcome
-
-    labels = list(domain.space.labels)
-    if list(entry.theta) != labels:
-        raise HritestError(
-            f"{entry.path}: field 'theta' has components {', '.join(entry.theta)}, but "
-            f"{entry.spec_name}'s theta is {', '.join(labels)}"
-        )
-    stored = {
-        "status": "ok",
-        "failure": True,
-        "objective": entry.objective,
-        "measures": [entry.measures.get(m.name) for m in domain.measures],
-    }
-    return replay_outcome(
-        domain,
-        theta=list(entry.theta.values()),
-        seed=entry.seed,
-        stored=stored,
-        against=f"corpus entry {entry.id}",
-        spec_digest=entry.spec_digest,
-    )
-
-
-def _then_now(replayed: Any) -> str:
-    def show(value: Any) -> str:
-        return f"{value:.6g}" if isinstance(value, float) else str(value)
-
-    rows = [(c.name, show(c.stored), show(c.replayed)) for c in replayed.checks if c.name != "status"]
-    width = max(len(r[0]) for r in rows)
-    lines = [f"  {'':{width}}  {'recorded':>12}  {'now':>12}"]
-    lines += [f"  {name:{width}}  {then:>12}  {now:>12}" for name, then, now in rows]
-    return "\n".join(lines)
-
-
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Any:
     report = yield
     if isinstance(item, CorpusItem) and call.when == "call" and item.hri_outcome:
         if item.hri_section:
             report.sections.append(("hritest", item.hri_section))
-        if item.hri_outcome == "stale" and report.skipped and isinstance(report.longrepr, tuple):
-            report.longrepr = (str(item.path), None, report.longrepr[2])  # the entry's file, not this module
         if item.hri_outcome == "now passing" and report.passed:
             report.wasxfail = f"hritest open failure no longer fails ({item.entry.path.name})"
     return report
@@ -432,6 +440,7 @@ class _Summary:
     def __init__(self, config: pytest.Config) -> None:
         self.config = config
         self.results: dict[str, list[tuple[str, str]]] = {}
+        self.notes: dict[str, str] = {}  # entry -> its failure rate and what changed since it was recorded
 
     def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
         props = dict(report.user_properties)
@@ -440,6 +449,10 @@ class _Summary:
         outcome = props.get("hri_outcome") or ("error" if report.failed else "")
         if outcome:
             self.results.setdefault(outcome, []).append((props["hri_entry"], report.nodeid))
+        notes = [f"fails {props['hri_failure_rate']} of its replays"] if "hri_failure_rate" in props else []
+        notes += [f"changed since recorded: {props['hri_changes']}"] if "hri_changes" in props else []
+        if notes:
+            self.notes[props["hri_entry"]] = "; ".join(notes)
 
     def pytest_terminal_summary(self, terminalreporter: Any) -> None:
         results, config, tr = self.results, self.config, terminalreporter
@@ -451,10 +464,10 @@ class _Summary:
         counts = [_count(len(results.get(o, [])), o) for o in OUTCOMES[:4]]
         counts += [_count(len(results[o]), o) for o in OUTCOMES[4:] if results.get(o)]
         tr.write_line(f"corpus {corpus}: {', '.join(counts)}")
-        for entry, nodeid in results.get("regression", []):
-            tr.write_line(f"REGRESSION  {entry}  ({nodeid})")
-        for entry, nodeid in results.get("error", []):
-            tr.write_line(f"ERROR       {entry}  ({nodeid})")
+        for label, outcome in (("REGRESSION", "regression"), ("ERROR", "error"), ("FLAKY", "flaky")):
+            for entry, nodeid in results.get(outcome, []):
+                note = f"{self.notes[entry]}; " if entry in self.notes else ""
+                tr.write_line(f"{label:<11} {entry}  ({note}{nodeid})")
         for entry, nodeid in results.get("search with new failures", []):
             tr.write_line(f"NEW         {entry}  (failures the corpus does not hold; {nodeid})")
         passing = results.get("now passing", [])
@@ -467,8 +480,10 @@ class _Summary:
                 ids = " ".join(f"--mark-fixed {entry}" for entry, _ in passing)
                 tr.write_line(f"mark them fixed: hritest promote --to {corpus} {ids}")
                 tr.write_line("            or: pytest --hri-mark-fixed")
-        for entry, nodeid in results.get("stale", []):
-            tr.write_line(f"stale       {entry}  (its spec changed or is gone; {nodeid})")
+        shown = {e for o in ("regression", "error", "flaky") for e, _ in results.get(o, [])}
+        for entry, note in self.notes.items():
+            if entry not in shown:
+                tr.write_line(f"changed     {entry}  ({note})")
 
 
 def _count(n: int, outcome: str) -> str:
@@ -494,7 +509,9 @@ def hri_scenario(request: pytest.FixtureRequest) -> Callable[..., tuple[Any, Any
     """
     config = request.config
 
-    def simulate(spec: str | os.PathLike[str], theta: Sequence[float] | Mapping[str, float], seed: int = 0):
+    def simulate(
+        spec: str | os.PathLike[str], theta: Sequence[float] | Mapping[str, float], seed: int = 0
+    ) -> tuple[Any, Any]:
         import numpy as np
 
         from hritest.evaluate import evaluate_with_rollout

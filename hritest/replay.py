@@ -7,27 +7,26 @@ tolerance (:data:`TOLERANCE` by default). For a scenario given by hand there is 
 so the scenario is simulated twice and the second outcome is compared with the first: a
 determinism check.
 
-:func:`compare` and :func:`scenario_digest` are pure; the rest reads run directories.
+:func:`compare` is pure; the rest reads run directories.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import yaml
 
+from hritest.corpus import scenario_digest
 from hritest.domain import Domain, compile_spec
 from hritest.errors import HritestError
 from hritest.evaluate import evaluate_with_rollout
 from hritest.protocols import Rollout
-from hritest.records import Evaluation, EvaluationRecord, rank_failures
+from hritest.records import Clause, Evaluation, EvaluationRecord, clauses_text, rank_failures
 from hritest.rundir import RunDirectory
 from hritest.spec import load_spec
 
@@ -64,16 +63,18 @@ class Replay:
     against: str  # what the outcome was compared with, in words
     tolerance: float
     reference: str = "stored"  # a short name for what was compared with (a table heading)
+    stored_fired: tuple[Clause, ...] = ()  # the failure clauses that held when it was stored
+
+    @property
+    def why(self) -> str:
+        """Which failure clauses held then and now: ``stored: fails objective >= 8 (objective=10)``."""
+        now = clauses_text(self.evaluation.fired) if self.evaluation.failure else ""
+        lines = [f"stored:   fails {clauses_text(self.stored_fired)}"] if self.stored_fired else []
+        return "\n".join([*lines, f"replayed: fails {now}" if now else "replayed: not a failure"])
 
     @property
     def matches(self) -> bool:
         return all(check.ok for check in self.checks)
-
-
-def scenario_digest(spec_digest: str, theta_repaired: Sequence[float], seed: int) -> str:
-    """sha256 of the spec digest, the repaired theta and the seed: one scenario's identity."""
-    payload = json.dumps([spec_digest, [float(v) for v in theta_repaired], int(seed)], separators=(",", ":"))
-    return hashlib.sha256(payload.encode()).hexdigest()
 
 
 def outcome_of(evaluation: Evaluation) -> dict[str, Any]:
@@ -174,7 +175,7 @@ def replay_record(
     domain: Domain, record: EvaluationRecord, *, spec_digest: str, tolerance: float = TOLERANCE
 ) -> Replay:
     """Re-simulates a stored evaluation record (its raw ``theta`` and ``seed``) and compares."""
-    return replay_outcome(
+    replayed = replay_outcome(
         domain,
         theta=record.theta,
         seed=record.seed,
@@ -183,6 +184,7 @@ def replay_record(
         spec_digest=spec_digest,
         tolerance=tolerance,
     )
+    return replace(replayed, stored_fired=record.fired)
 
 
 def replay_outcome(

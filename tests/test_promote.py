@@ -123,9 +123,63 @@ def test_the_default_corpus_comes_from_the_nearest_pyproject(run, tmp_path, monk
 def test_promoted_failures_replay_under_pytest_as_open_failures(run, pytester):
     corpus = pytester.path / "tests" / "hri_failures"
     assert promote(run, "--to", corpus, "--top", 3).exit_code == 0
-    result = pytester.runpytest()
+    entry = load_entry(next(corpus.glob("toy/*.yaml")))
+    assert entry.format == 2 and len(entry.outcome_digest) == 64 and entry.seconds is not None
+    assert {"task plugin source", "failure condition", "scenario space"} <= set(entry.outcome_parts)
+    assert entry.why and entry.why[0].startswith("objective >= 8 (objective=")
+    # the run's spec lies outside pytester's project: its plugins run only when that is allowed
+    result = pytester.runpytest("--hri-allow-outside")
     result.assert_outcomes(xfailed=3)
-    result.stdout.fnmatch_lines(["corpus tests/hri_failures: 0 regressions, 3 still failing, 0 now passing, 0 stale"])
+    result.stdout.fnmatch_lines(["corpus tests/hri_failures: 0 regressions, 3 still failing, 0 now passing, 0 flaky"])
+    pytester.runpytest().assert_outcomes(failed=3)
+
+
+def test_fixed_entries_that_still_fail_fail_pytest_after_a_comment_and_a_search_setting(pytester):
+    specs = pytester.path / "specs"
+    specs.mkdir()
+    shutil.copy(FIXTURES / "toy_plugins.py", specs / "toy_plugins.py")
+    shutil.copy(FIXTURES / "toy.yaml", specs / "toy.yaml")
+    run = pytester.path / "runs" / "toy"
+    qd.start(
+        spec_file=specs / "toy.yaml", out=run, algorithm="random", budget=60, seed=4, backend=qd.Backend(workers=1)
+    )
+    corpus = pytester.path / "tests" / "hri_failures"
+    assert promote(run, "--to", corpus, "--top", 3).exit_code == 0
+    ids = [f.stem for f in corpus.glob("toy/*.yaml")]
+    assert len(ids) == 3
+    assert promote("--to", corpus, *[a for i in ids for a in ("--mark-fixed", i)]).exit_code == 0
+    spec = specs / "toy.yaml"
+    spec.write_text("# a comment that decides nothing\n" + spec.read_text().replace("budget: 500", "budget: 5"))
+    result = pytester.runpytest()
+    result.assert_outcomes(failed=3)
+    assert result.ret == pytest.ExitCode.TESTS_FAILED
+    result.stdout.fnmatch_lines(["corpus tests/hri_failures: 3 regressions, *"])
+    result.stdout.no_fnmatch_line("*changed since*")
+
+
+def test_top_keeps_the_worst_failure_of_every_clause_that_fired(tmp_path):
+    shutil.copy(FIXTURES / "toy_plugins.py", tmp_path / "toy_plugins.py")
+    spec = tmp_path / "toy.yaml"
+    # far-apart goals make the second clause fire with a low objective, never among the highest
+    spec.write_text(
+        (FIXTURES / "toy.yaml")
+        .read_text()
+        .replace("failure: objective >= 8", "failure: objective >= 9.5 or goal_distance >= 0.25")
+    )
+    qd.start(
+        spec_file=spec, out=tmp_path / "run", algorithm="random", budget=200, seed=1, backend=qd.Backend(workers=1)
+    )
+    records = {r.index: r for r in RunDirectory.open(tmp_path / "run").evaluations()}
+    reported = [records[f["id"]] for f in failures(tmp_path / "run")]
+    fired = {c.text for r in reported for c in r.fired}
+    assert fired == {"objective >= 9.5", "goal_distance >= 0.25"}
+    by_objective = sorted(reported, key=lambda r: -r.objective)[:2]
+    assert all(c.text == "objective >= 9.5" for r in by_objective for c in r.fired)  # what --top used to keep
+
+    assert promote(tmp_path / "run", "--to", tmp_path / "corpus", "--top", 2).exit_code == 0
+    kept = [load_entry(f) for f in (tmp_path / "corpus").glob("toy/*.yaml")]
+    assert len(kept) == 2
+    assert {w.split(" (")[0] for e in kept for w in e.why} == fired
 
 
 @pytest.mark.parametrize(

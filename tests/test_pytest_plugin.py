@@ -24,6 +24,7 @@ from hritest.cli import app
 from hritest.corpus import dump_entry, load_entry
 from hritest.domain import compile_spec
 from hritest.evaluate import evaluate
+from hritest.outcome_digest import outcome_digest
 from hritest.replay import scenario_digest
 from hritest.rundir import digest
 from hritest.spec import load_spec
@@ -66,8 +67,11 @@ class Project:
         path.write_text((FIXTURES / "toy.yaml").read_text().replace("name: toy\n", f"name: {name}\n"))
         return path
 
-    def record(self, theta: list[float], *, status: str, spec: Path | None = None, seed: int = 0) -> Path:
-        """Writes the corpus entry of ``theta`` as the unfixed plugins evaluated it."""
+    def record(
+        self, theta: list[float], *, status: str, spec: Path | None = None, seed: int = 0, version: int = 2
+    ) -> Path:
+        """Writes the corpus entry of ``theta`` as the unfixed plugins evaluated it, as ``promote`` would
+        (``version`` 1: as hritest wrote entries before outcome digests)."""
         spec = spec or self.specs / "toy.yaml"
         evaluation = evaluate(self.recorder, np.array(theta), seed=seed)
         assert evaluation.ok and evaluation.failure, "recorded entries are failures"
@@ -77,10 +81,17 @@ class Project:
         name = load_spec(spec).name
         path = self.corpus / name / f"{scenario[:12]}.yaml"
         path.parent.mkdir(parents=True, exist_ok=True)
+        outcome = outcome_digest(self.recorder)
+        added = {
+            "outcome_digest": outcome.digest,
+            "outcome_parts": dict(outcome.parts),
+            "seconds": evaluation.seconds,
+            "why": [str(c) for c in evaluation.fired],
+        }
         path.write_text(
             dump_entry(
                 {
-                    "format": 1,
+                    "format": version,
                     "status": status,
                     "spec": str(Path("..", "..", "..", "specs", spec.name))
                     if self.corpus.parent.name == "tests"
@@ -97,6 +108,7 @@ class Project:
                     "scenario_digest": scenario,
                     "versions": {"hritest": "0.1.0"},
                     "origin": {"run": "runs/toy", "evaluation": 7},
+                    **(added if version == 2 else {}),
                 }
             )
         )
@@ -162,25 +174,36 @@ def test_fixed_passing_regressed_still_failing_and_now_passing(project):
         [
             "hritest: failure corpus tests/hri_failures (4 entries)",
             "*= hritest =*",
-            "corpus tests/hri_failures: 1 regression, 1 still failing, 1 now passing, 0 stale, 1 passing",
-            f"REGRESSION  {entry_id(regressed)}  (*)",
+            "corpus tests/hri_failures: 1 regression, 1 still failing, 1 now passing, 0 flaky, 1 passing",
+            f"REGRESSION  {entry_id(regressed)}  (changed since recorded: task plugin source, robot plugin source, "
+            "human plugin source; *)",
             "now passing (open failures that no longer fail):",
             f"  {entry_id(now_ok)}  (*)",
             f"mark them fixed: hritest promote --to tests/hri_failures --mark-fixed {entry_id(now_ok)}",
         ]
     )
-    # The regression's report: what it was and what it is now, and how to replay it.
+    # The regression's report: what it was and what it is now, which clause fired, what changed since
+    # it was recorded (the fix edited the plugins' file), and how to replay it.
     result.stdout.fnmatch_lines(
         [
-            f"*hritest {entry_id(regressed)} was marked fixed but fails again: 'objective >= 8' holds",
+            f"*hritest {entry_id(regressed)} was marked fixed but fails again: objective >= 8 (objective=9.425) "
+            "(spec or plugins changed since this was recorded: task plugin source, robot plugin source, "
+            "human plugin source)",
             "*recorded*now",
             "*objective*10*9.4*",
             "*goal_distance*",
+            "  recorded: fails objective >= 8 (objective=10)",
+            "  now:      fails objective >= 8 (objective=9.425)",
             f"corpus file: tests/hri_failures/toy/{regressed.name}",
             "replay it: hritest replay specs/toy.yaml --seed 0 --theta 0.6,0.05,0.6,0.05,0.05,0.05,0.05",
         ]
     )
-    result.stdout.fnmatch_lines([f"XFAIL *{still.name}::toy::{still.stem} - hritest open failure still fails*"])
+    result.stdout.fnmatch_lines(
+        [
+            f"XFAIL *{still.name}::toy::{still.stem} - hritest open failure still fails: "
+            "objective >= 8 (objective=9.425)*"
+        ]
+    )
     result.stdout.fnmatch_lines([f"XPASS *{now_ok.name}::toy::{now_ok.stem}*no longer fails*"])
     # The now-passing entry's report section says how to mark it fixed; nothing was changed.
     result.stdout.fnmatch_lines(["*hritest*", f"open failure {entry_id(now_ok)} no longer fails*"])
@@ -210,28 +233,143 @@ def test_mark_fixed_option_flips_now_passing_entries(project):
     project.pytester.runpytest().assert_outcomes(passed=1, xfailed=1)
 
 
-def test_an_entry_whose_spec_changed_is_skipped_as_stale(project):
-    entry = project.record(FAILS_WHEN_FIXED[0], status="fixed")
+def test_fixed_entries_that_fail_are_regressions_whatever_changed_in_the_spec(project):
+    project.recorder = compile_spec(load_spec(project.specs / "toy.yaml"))  # recorded with today's plugins
+    entries = [project.record(theta, status="fixed") for theta in FAILS_WHEN_FIXED]
     spec = project.specs / "toy.yaml"
+    # a comment and a search setting decide no outcome: the entries replay, with nothing to note
+    spec.write_text("# a comment\n" + spec.read_text().replace("budget: 500", "budget: 50"))
+    result = project.pytester.runpytest()
+    result.assert_outcomes(failed=2)
+    assert result.ret == pytest.ExitCode.TESTS_FAILED
+    result.stdout.no_fnmatch_line("*changed since*")
+    # a changed failure condition is shown beside the verdict, and a fixed entry that fails still fails
     spec.write_text(spec.read_text().replace("failure: objective >= 8", "failure: objective >= 9"))
-    (project.corpus / "toy" / "gone.yaml").write_text(
-        entry.read_text().replace("spec: ../../../specs/toy.yaml", "spec: ../../../specs/gone.yaml")
-    )
-    result = project.pytester.runpytest("-rs")
-    result.assert_outcomes(skipped=2)
-    assert result.ret == pytest.ExitCode.OK
+    result = project.pytester.runpytest()
+    result.assert_outcomes(failed=2)
     result.stdout.fnmatch_lines(
         [
-            "corpus tests/hri_failures: 0 regressions, 0 still failing, 0 now passing, 2 stale",
-            f"stale       {entry_id(entry)}  (its spec changed or is gone; *)",
-            "stale       toy/gone  (its spec changed or is gone; *)",
-            f"SKIPPED * tests/hri_failures/toy/{entry.name}: hritest stale: specs/toy.yaml changed since "
-            f"{entry_id(entry)} was recorded (spec digest * then, * now); search again and promote, or delete "
-            f"tests/hri_failures/toy/{entry.name}",
-            "SKIPPED * tests/hri_failures/toy/gone.yaml: hritest stale: its spec specs/gone.yaml no longer exists; "
-            "restore it, or delete tests/hri_failures/toy/gone.yaml",
+            f"*{entry_id(entries[0])} was marked fixed but fails again: objective >= 9 (objective=9.425) (spec or "
+            "plugins changed since this was recorded: failure condition)",
         ]
     )
+
+
+def test_an_entry_of_format_1_replays_and_says_when_its_spec_file_changed(project):
+    entry = project.record(FAILS_WHEN_FIXED[0], status="fixed", version=1)
+    assert "outcome_digest" not in entry.read_text() and load_entry(entry).format == 1
+    project.pytester.runpytest().assert_outcomes(failed=1)
+    spec = project.specs / "toy.yaml"
+    spec.write_text(spec.read_text() + "# edited\n")
+    result = project.pytester.runpytest()
+    result.assert_outcomes(failed=1)
+    result.stdout.fnmatch_lines(["*fails again*changed since this was recorded: the spec file (recorded before*"])
+
+
+def test_an_entry_whose_spec_is_gone_or_outside_the_project_is_an_error(project, tmp_path):
+    entry = project.record(FAILS_WHEN_FIXED[0], status="open")
+    gone = project.corpus / "toy" / entry.name
+    text = entry.read_text()
+    gone.write_text(text.replace("spec: ../../../specs/toy.yaml", "spec: ../../../specs/gone.yaml"))
+    result = project.pytester.runpytest()
+    result.assert_outcomes(failed=1)
+    result.stdout.fnmatch_lines([f"hritest {entry_id(entry)} cannot be replayed: its spec * no longer exists*"])
+
+    outside = tmp_path / "elsewhere"
+    outside.mkdir()
+    shutil.copy(project.specs / "toy.yaml", outside / "toy.yaml")
+    shutil.copy(project.specs / "toy_plugins.py", outside / "toy_plugins.py")
+    entry.write_text(text.replace("spec: ../../../specs/toy.yaml", f"spec: {outside / 'toy.yaml'}"))
+    result = project.pytester.runpytest()
+    result.assert_outcomes(failed=1)
+    result.stdout.fnmatch_lines(["*field 'spec' names *elsewhere/toy.yaml, outside the project*--hri-allow-outside*"])
+    project.pytester.runpytest("--hri-allow-outside").assert_outcomes(xfailed=1)
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (("  g0x: 0.6\n", "  g0x: 0.52\n"), "field 'theta' does not repair to the stored field 'theta_repaired'*g0x*"),
+        (("seed: 0\n", "seed: 1\n"), "field 'scenario_digest': does not match*"),
+    ],
+)
+def test_a_fixed_entry_edited_to_pass_is_an_error_naming_the_field(project, edit, message):
+    project.recorder = compile_spec(load_spec(project.specs / "toy.yaml"))
+    path = project.record(FAILS_WHEN_FIXED[0], status="fixed")
+    old, new = edit
+    assert old in path.read_text()  # the first is theta's (theta_repaired follows it)
+    path.write_text(path.read_text().replace(old, new, 1))
+    result = project.pytester.runpytest()
+    assert result.ret != pytest.ExitCode.OK
+    result.stdout.fnmatch_lines([f"*{message}"])
+
+
+def test_a_misplaced_entry_file_is_an_error(project):
+    entry = project.record(FAILS_WHEN_FIXED[0], status="open")
+    (project.corpus / "loose.yaml").write_text(entry.read_text())
+    (project.corpus / "toy" / "other.yml").write_text(entry.read_text())
+    (project.corpus / "toy" / "deeper").mkdir()
+    (project.corpus / "toy" / "deeper" / entry.name).write_text(entry.read_text())
+    result = project.pytester.runpytest()
+    assert result.ret == pytest.ExitCode.INTERRUPTED
+    result.stdout.fnmatch_lines(["*corpus entries live in a folder per spec*"])
+    result.stdout.fnmatch_lines(["*rename it to other.yaml*"])
+    result.stdout.fnmatch_lines(["*one folder deep*"])
+
+
+def test_a_missing_hri_corpus_folder_is_a_usage_error(project):
+    result = project.pytester.runpytest("--hri-corpus", "no/such/folder")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    result.stderr.fnmatch_lines(["*--hri-corpus no/such/folder: * is not a folder*"])
+
+
+@pytest.mark.parametrize(
+    ("fault", "args", "message"),
+    [
+        ("hang", ["--hri-timeout", "2"], "did not finish within 2 s*"),
+        ("exit", [], "the replay process died (exit status 3)*"),
+    ],
+)
+def test_a_plugin_that_hangs_or_kills_its_process_fails_the_entry(project, fault, args, message):
+    hung = project.record(FAILS_WHEN_FIXED[0], status="fixed")  # noise[0] = 0.05 > fault_above
+    fine = project.record(PASSES_WHEN_FIXED[1], status="fixed")
+    plugins = project.specs / "toy_plugins.py"
+    plugins.write_text(plugins.read_text().replace('= "none"\n', f'= "{fault}"\n'))
+    result = project.pytester.runpytest(*args)
+    result.assert_outcomes(failed=1, passed=1)  # the worker is replaced, and the next entry replays
+    assert result.ret == pytest.ExitCode.TESTS_FAILED
+    result.stdout.fnmatch_lines([f"hritest {entry_id(hung)} cannot be replayed: {message}"])
+    assert load_entry(fine).status == "fixed"
+
+
+def test_replays_with_several_seeds_report_an_entry_that_fails_sometimes_as_flaky(project):
+    plugins = project.specs / "toy_plugins.py"
+    text = plugins.read_text()
+    assert text.count("        distance = float(np.linalg.norm(g0 - g1))\n") == 1
+    plugins.write_text(  # a stochastic task: the noisy scenario (objective 9.4) fails with some seeds only
+        text.replace(
+            "        distance = float(np.linalg.norm(g0 - g1))\n",
+            "        distance = float(np.linalg.norm(g0 - g1)) + float(rng.uniform(0, 0.05))\n",
+        )
+    )
+    open_entry = project.record(FAILS_WHEN_FIXED[0], status="open")
+    fixed = project.record(FAILS_WHEN_FIXED[1], status="fixed")
+    result = project.pytester.runpytest("--hri-replays", "8", "-rxX")
+    result.assert_outcomes(xfailed=1, failed=1)
+    result.stdout.fnmatch_lines(
+        [
+            f"XFAIL *{open_entry.stem} - hritest open failure (flaky: fails *% of its replays) still fails with "
+            "* of 8 seeds: objective >= 8 *; passes with seed *",
+        ]
+    )
+    result.stdout.fnmatch_lines([f"FLAKY       {entry_id(open_entry)}  (fails *% of its replays; *"])
+    result.stdout.fnmatch_lines(
+        [
+            f"*{entry_id(fixed)} was marked fixed but fails again with * of 8 seeds*",
+            "  now:      fails objective >= 8 * (seed *; recorded with seed 0)",
+        ]
+    )
+    result.stdout.fnmatch_lines(["corpus tests/hri_failures: 1 regression, 0 still failing, 0 now passing, 1 flaky"])
 
 
 def test_a_stored_failure_that_now_crashes_fails_with_the_plugins_message(project):
@@ -242,9 +380,9 @@ def test_a_stored_failure_that_now_crashes_fails_with_the_plugins_message(projec
     result.assert_outcomes(failed=1)
     result.stdout.fnmatch_lines(
         [
-            f"hritest {entry_id(entry)} no longer evaluates: status plugin_error",
+            f"hritest {entry_id(entry)} cannot be replayed: no longer evaluates: status plugin_error (seed 0)",
             "task plugin ToyTask raised RuntimeError: toy plugin exploded",
-            "corpus tests/hri_failures: 0 regressions, 0 still failing, 0 now passing, 0 stale, 1 error",
+            "corpus tests/hri_failures: 0 regressions, 0 still failing, 0 now passing, 0 flaky, 1 error",
             f"ERROR       {entry_id(entry)}  (*)",
         ]
     )
@@ -374,7 +512,7 @@ def test_search_budget_fails_on_failures_the_corpus_does_not_hold(project, searc
         [
             "*a Random search of 40 evaluations found * failure(s) of toy that the corpus does not hold:",
             "keep them: hritest promote .pytest_cache/d/hritest-search/toy --to tests/hri_failures",
-            "corpus tests/hri_failures: 0 regressions, 1 still failing, 0 now passing, 0 stale, "
+            "corpus tests/hri_failures: 0 regressions, 1 still failing, 0 now passing, 0 flaky, "
             "1 search with new failures",
             "NEW         toy/search  (failures the corpus does not hold; tests/hri_failures/toy::search)",
         ]

@@ -49,6 +49,8 @@ def test_a_stored_failure_replays_to_its_stored_outcome(run):
     assert "replay matches" in result.output
     assert "objective and measures within 1e-06 absolute" in result.output
     assert f"evaluation {fid} as stored in evaluations.jsonl" in result.output
+    assert "stored:   fails objective >= 8 (objective=" in result.output  # the clause that fired, then and now
+    assert "replayed: fails objective >= 8 (objective=" in result.output
     path = run / "recordings" / f"{fid}.rrd"
     assert path.is_file()
     assert "world/robot/path" in recorded_entities(path)  # the toy task's one trajectory
