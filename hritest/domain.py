@@ -6,6 +6,7 @@ it resolves plugins, checks their parameters, and fixes the order of theta's com
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -36,7 +37,7 @@ class Measure:
     name: str
     expression: expr.Expression
     range: tuple[float, float]
-    cells: int
+    cells: int | None  # along this measure, for a grid archive
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -79,7 +80,13 @@ class Domain:
 
     @property
     def archive_dims(self) -> tuple[int, ...]:
+        """A grid archive's cells per measure."""
         return tuple(m.cells for m in self.measures)
+
+    @property
+    def archive_cells(self) -> int:
+        """How many cells the result archive has, grid or cvt."""
+        return self.spec.archive.cells if self.spec.archive.type == "cvt" else math.prod(self.archive_dims)
 
     @property
     def archive_ranges(self) -> tuple[tuple[float, float], ...]:

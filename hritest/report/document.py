@@ -17,6 +17,7 @@ from hritest.report.html import Badge, Code, Details, Document, Figure, Link, Se
 from hritest.report.recordings import Recorded
 from hritest.report.run import RunData
 from hritest.report.select import worst_failures
+from hritest.search.archives import tessellation
 
 RECORDINGS = 10  # the worst failures recorded by default (the most different ones come on top)
 
@@ -137,9 +138,7 @@ def run_document(
 def _glance(data: RunData) -> list:
     spec, meta, last = data.spec, data.meta, (data.progress[-1] if data.progress else {})
     statuses = Counter(r.status.value for r in data.records)
-    cells = 1
-    for m in spec.measures:
-        cells *= m.cells
+    cells = spec.archive.cells if spec.archive.type == "cvt" else math.prod(m.cells for m in spec.measures)
     rows = [
         ("spec", f"{spec.name} ({meta.get('spec_file', 'spec.yaml')})"),
         ("spec digest", str(meta.get("spec_digest", ""))[:16]),
@@ -206,6 +205,11 @@ def _view(data: RunData, labelled: Sequence[int], title: str | None = None) -> f
         measure_names=data.measure_names,
         ranges=data.ranges,
         cells=[m.cells for m in spec.measures],
+        centroids=(
+            tessellation(spec.archive.cells, tuple(map(tuple, data.ranges)), spec.archive.samples)
+            if spec.archive.type == "cvt"
+            else None
+        ),
         objective_range=tuple(spec.objective.range),
         objective_label=f"objective: {spec.objective.expr}",
         elites=[(r.objective, list(r.measures)) for r in data.elites],

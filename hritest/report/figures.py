@@ -9,8 +9,10 @@ on a ribs ``GridArchive`` rebuilt from the run's elites. It does not call that f
 from __future__ import annotations
 
 import io
+import itertools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import matplotlib
 
@@ -19,8 +21,10 @@ matplotlib.use("Agg")  # before pyplot: no display, same pixels everywhere
 import matplotlib.pyplot as plt
 import numpy as np
 from ribs.archives import GridArchive
+from scipy.spatial import cKDTree
 
 CMAP = "viridis"
+_PIXELS = 400  # per side of a cvt archive's drawing
 DPI = 110
 _FAILURE = "#e8251f"
 _KINDS = ("#e8251f", "#ff9f1c", "#ffffff", "#f72585", "#4cc9f0")  # kinds of failure: apart on viridis
@@ -47,12 +51,25 @@ class ArchiveView:
     failures: Sequence[tuple[int, Sequence[float]]] = ()
     labelled: Sequence[int] = field(default_factory=tuple)
     kinds: Mapping[int, int] = field(default_factory=dict)
+    centroids: np.ndarray | None = None  # a cvt archive's (cells, measures); None: a grid of ``cells``
 
 
 def archive_heatmap(view: ArchiveView) -> bytes:
-    """One archive as a heatmap of its best objective per cell, failures marked."""
-    fig, ax = plt.subplots(figsize=(8.6, 5.6))
-    _draw_archive(ax, view)
+    """One archive as a heatmap of its best objective per cell, failures marked; with three or
+    more measures (a cvt archive), its elites projected on each pair of measures."""
+    if len(view.measure_names) <= 2:
+        fig, ax = plt.subplots(figsize=(8.6, 5.6))
+        _draw_archive(ax, view)
+        return _png(fig)
+    pairs = list(itertools.combinations(range(len(view.measure_names)), 2))
+    columns = min(3, len(pairs))
+    rows = -(-len(pairs) // columns)
+    fig, axes = plt.subplots(rows, columns, figsize=(5.2 * columns, 4.3 * rows), squeeze=False)
+    for ax, pair in zip(axes.flat, pairs):
+        _draw_projection(ax, view, pair)
+    for ax in axes.flat[len(pairs) :]:
+        ax.set_visible(False)
+    fig.suptitle(view.title)
     return _png(fig)
 
 
@@ -101,6 +118,12 @@ def qd_curves(series: Sequence[tuple[str, Sequence[dict]]], *, normalised: bool 
 
 
 def _draw_archive(ax: plt.Axes, view: ArchiveView) -> None:
+    if view.centroids is not None:
+        if len(view.measure_names) == 2:
+            _draw_voronoi(ax, view)
+        else:
+            _draw_projection(ax, view, (0, 1) if len(view.measure_names) > 1 else (0, 0))
+        return
     dims = min(2, len(view.cells))
     archive = _archive(view, dims)
     lo, hi = view.objective_range
@@ -127,11 +150,52 @@ def _draw_archive(ax: plt.Axes, view: ArchiveView) -> None:
     _mark_failures(ax, view, dims)
 
 
-def _mark_failures(ax: plt.Axes, view: ArchiveView, dims: int) -> None:
+def _draw_voronoi(ax: plt.Axes, view: ArchiveView) -> None:
+    """A two-measure cvt archive: each cell (the points nearest its centroid) coloured by its elite."""
+    (x0, x1), (y0, y1) = view.ranges[:2]
+    lo, hi = view.objective_range
+    best = np.full(len(view.centroids), np.nan)
+    if view.elites:
+        measures = np.array([m[:2] for _, m in view.elites], dtype=float)
+        cells = cKDTree(view.centroids).query(measures)[1]
+        np.fmax.at(best, cells, np.array([o for o, _ in view.elites], dtype=float))
+    xs, ys = np.linspace(x0, x1, _PIXELS), np.linspace(y0, y1, _PIXELS)
+    pixels = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    image = best[cKDTree(view.centroids).query(pixels)[1]].reshape(_PIXELS, _PIXELS)
+    mesh = ax.imshow(image, origin="lower", extent=(x0, x1, y0, y1), aspect="auto", cmap=CMAP, vmin=lo, vmax=hi)
+    ax.scatter(view.centroids[:, 0], view.centroids[:, 1], s=1, color="#9a9aa3", zorder=2)
+    _frame(ax, view, (0, 1), mesh)
+
+
+def _draw_projection(ax: plt.Axes, view: ArchiveView, pair: tuple[int, int]) -> None:
+    """A cvt archive's elites on two of its measures, coloured by objective."""
+    lo, hi = view.objective_range
+    i, j = pair
+    points = np.array([[m[i], m[j]] for _, m in view.elites], dtype=float).reshape(-1, 2)
+    objectives = np.array([o for o, _ in view.elites], dtype=float)
+    mesh = ax.scatter(points[:, 0], points[:, 1], c=objectives, s=9, cmap=CMAP, vmin=lo, vmax=hi, zorder=2)
+    _frame(ax, view, pair, mesh)
+
+
+def _frame(ax: plt.Axes, view: ArchiveView, pair: tuple[int, int], mesh: Any) -> None:
+    i, j = pair
+    ax.set_xlim(*view.ranges[i])
+    ax.set_ylim(*view.ranges[j])
+    ax.set_xlabel(view.measure_names[i])
+    ax.set_ylabel(view.measure_names[j])
+    ax.set_facecolor(_EMPTY)
+    ax.set_title(view.title if len(view.measure_names) <= 2 else f"{view.measure_names[i]} x {view.measure_names[j]}")
+    bar = ax.figure.colorbar(mesh, ax=ax, pad=0.02)
+    bar.set_label(view.objective_label)
+    _mark_failures(ax, view, 2, pair)
+
+
+def _mark_failures(ax: plt.Axes, view: ArchiveView, dims: int, pair: tuple[int, int] = (0, 1)) -> None:
     if not view.failures:
         return
-    ranges = np.array(view.ranges[:dims], dtype=float)
-    points = np.array([[*m[:dims]] for _, m in view.failures], dtype=float)
+    axes = list(pair[:dims])
+    ranges = np.array([view.ranges[a] for a in axes], dtype=float)
+    points = np.array([[m[a] for a in axes] for _, m in view.failures], dtype=float)
     points = np.clip(points, ranges[:, 0], ranges[:, 1])
     if dims == 1:
         points = np.column_stack([points[:, 0], np.full(len(points), 0.5)])

@@ -10,44 +10,64 @@ workspace-assignment measures), so that every assignment of objects to regions k
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
-from ribs.archives import GridArchive
+from ribs.archives import ArchiveBase, CVTArchive, GridArchive, k_means_centroids
 
 from hritest.domain import Domain
 
+CENTROID_SEED = 0  # a cvt archive's tessellation is the spec's: the same for every run
 
-def result_archive(domain: Domain, *, seed: int) -> GridArchive:
+
+def result_archive(domain: Domain, *, seed: int) -> ArchiveBase:
     """Raw objective over the spec's measures; QD-score counts ``objective - range low`` per elite."""
     lo = domain.spec.objective.range[0]
-    return GridArchive(
-        solution_dim=domain.space.dim,
-        dims=domain.archive_dims,
-        ranges=domain.archive_ranges,
-        qd_score_offset=lo,
-        seed=seed,
-        extra_fields={"evaluation": ((), np.int64)},
-    )
+    common = {
+        "solution_dim": domain.space.dim,
+        "ranges": domain.archive_ranges,
+        "qd_score_offset": lo,
+        "seed": seed,
+        "extra_fields": {"evaluation": ((), np.int64)},
+    }
+    if domain.spec.archive.type == "cvt":
+        return CVTArchive(centroids=centroids(domain), **common)
+    return GridArchive(dims=domain.archive_dims, **common)
 
 
-def search_archive(domain: Domain, *, seed: int, dims: tuple[int, ...] | None = None) -> GridArchive:
-    """Regularised objective, spec measures plus region axes; CMA-MAE thresholds from the spec.
-
-    Args:
-        dims: cells per spec measure (default: the spec's); the region axes are appended.
-    """
+def search_archive(domain: Domain, *, seed: int) -> ArchiveBase:
+    """Regularised objective, spec measures plus region axes; CMA-MAE thresholds from the spec."""
     settings = domain.spec.search.emitter
     regions = len(domain.repair.region_names)
     extra = len(workspace_objects(domain))
-    return GridArchive(
-        solution_dim=domain.space.dim,
-        dims=tuple(dims or domain.archive_dims) + (regions,) * extra,
-        ranges=tuple(domain.archive_ranges) + ((-0.5, regions - 0.5),) * extra,
-        learning_rate=settings.learning_rate,
-        threshold_min=settings.threshold_min,
-        seed=seed,
-    )
+    common = {
+        "solution_dim": domain.space.dim,
+        "ranges": tuple(domain.archive_ranges) + ((-0.5, regions - 0.5),) * extra,
+        "learning_rate": settings.learning_rate,
+        "threshold_min": settings.threshold_min,
+        "seed": seed,
+    }
+    if domain.spec.archive.type == "cvt":
+        return CVTArchive(centroids=centroids(domain, regions=(regions,) * extra), **common)
+    return GridArchive(dims=tuple(domain.archive_dims) + (regions,) * extra, **common)
+
+
+def centroids(domain: Domain, *, cells: int | None = None, regions: tuple[int, ...] = ()) -> np.ndarray:
+    """The cvt archive's centroids over the spec's measures (and ``regions``' axes, when the search
+    archive has them), or ``cells`` of them. They depend on the spec alone, not on a run's seed: every
+    run of a spec shares one tessellation, so runs compare cell for cell."""
+    spec = domain.spec.archive
+    ranges = tuple(domain.archive_ranges) + tuple((-0.5, n - 0.5) for n in regions)
+    return tessellation(cells or spec.cells, ranges, spec.samples)
+
+
+@functools.lru_cache(maxsize=16)
+def tessellation(cells: int, ranges: tuple[tuple[float, float], ...], samples: int) -> np.ndarray:
+    """``cells`` centroids over ``ranges`` by k-means on ``samples`` uniform points (read-only)."""
+    found, _ = k_means_centroids(centroids=cells, ranges=ranges, samples=samples, seed=CENTROID_SEED)
+    found.setflags(write=False)
+    return found
 
 
 def workspace_objects(domain: Domain) -> tuple[str, ...]:
@@ -75,7 +95,7 @@ class Summary:
     elites: int
 
     @classmethod
-    def of(cls, archive: GridArchive, objective_range: tuple[float, float]) -> Summary:
+    def of(cls, archive: ArchiveBase, objective_range: tuple[float, float]) -> Summary:
         stats = archive.stats
         span = objective_range[1] - objective_range[0]
         return cls(

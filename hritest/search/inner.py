@@ -14,7 +14,7 @@ import warnings
 
 import numpy as np
 import torch
-from ribs.archives import GridArchive
+from ribs.archives import ArchiveBase, CVTArchive, GridArchive
 from ribs.emitters import EvolutionStrategyEmitter, GradientArborescenceEmitter
 from ribs.schedulers import Scheduler
 
@@ -82,7 +82,7 @@ def exploit(
     iterations: int,
     seed: int,
     stall: int | None = None,
-) -> GridArchive:
+) -> ArchiveBase:
     """Runs the inner loop from scratch and returns its archive of surrogate elites.
 
     With ``stall``, it stops early once the archive's QD-score has not grown by
@@ -148,21 +148,30 @@ def exploit(
     return archive
 
 
-def downsample(domain: Domain, archive: GridArchive, *, rng: np.random.Generator) -> np.ndarray:
-    """One uniformly random elite per block of the selection grid, in a random order.
+def downsample(domain: Domain, archive: ArchiveBase, *, rng: np.random.Generator) -> np.ndarray:
+    """One uniformly random elite per block of the selection archive, in a random order.
 
-    The selection grid has the spec's ``downsample_cells`` per measure (default: the archive's
-    own cells, i.e. every elite) and a single cell along each region axis, as in the reference.
+    For a grid, the selection grid has the spec's ``downsample_cells`` per measure (default: the
+    archive's own cells, i.e. every elite) and a single cell along each region axis, as in the
+    reference. For a cvt archive, the blocks are the cells of a coarser tessellation of the spec's
+    measures, ``downsample_cells`` of them (default: every elite is its own block).
     """
     data = archive.data(["solution", "measures"])
     if len(data["solution"]) == 0:
         return np.zeros((0, domain.space.dim))
-    cells = domain.spec.search.surrogate.downsample_cells or list(domain.archive_dims)
-    extra = archive.measure_dim - len(domain.measures)
-    blocks = GridArchive(
-        solution_dim=1, dims=[*cells, *([1] * extra)], ranges=list(zip(archive.lower_bounds, archive.upper_bounds))
-    )
-    block = blocks.index_of(data["measures"])
+    cells = domain.spec.search.surrogate.downsample_cells
+    measures = data["measures"][:, : len(domain.measures)]
+    if domain.spec.archive.type == "cvt":
+        block = (
+            np.arange(len(measures))
+            if cells is None
+            else CVTArchive(
+                solution_dim=1, centroids=archives.centroids(domain, cells=cells[0]), ranges=domain.archive_ranges
+            ).index_of(measures)
+        )
+    else:
+        grid = GridArchive(solution_dim=1, dims=cells or list(domain.archive_dims), ranges=domain.archive_ranges)
+        block = grid.index_of(measures)
     order = rng.permutation(len(block))
     _, first = np.unique(block[order], return_index=True)  # a random elite per block
     chosen = order[first]

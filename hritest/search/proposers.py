@@ -185,13 +185,20 @@ def _errors(domain: Domain, held_out: list[tuple[int, list[float], list[float]]]
     lo, hi = domain.spec.objective.range
     scale = np.array([hi - lo] + [1.0] * len(domain.measures))
     errors = np.abs(predicted - true) * scale
-    grid = archives.result_archive(domain, seed=0)
-    predicted_cells = np.array(np.unravel_index(grid.index_of(predicted[:, 1:]), grid.dims)).T
-    true_cells = np.array(np.unravel_index(grid.index_of(true[:, 1:]), grid.dims)).T
+    archive = archives.result_archive(domain, seed=0)
+    predicted_index, true_index = archive.index_of(predicted[:, 1:]), archive.index_of(true[:, 1:])
+    if domain.spec.archive.type == "cvt":  # the distance between the cells' centroids, in ranges
+        width = np.array([hi - lo for lo, hi in domain.archive_ranges])
+        apart = np.linalg.norm((archive.centroids[predicted_index] - archive.centroids[true_index]) / width, axis=1)
+    else:  # cells apart, summed over the measures
+        apart = np.abs(
+            np.array(np.unravel_index(predicted_index, archive.dims))
+            - np.array(np.unravel_index(true_index, archive.dims))
+        ).sum(axis=0)
     return {
         "held_out": len(true),
         "objective_mae": float(errors[:, 0].mean()),
         "measure_mae": {m.name: float(errors[:, i + 1].mean()) for i, m in enumerate(domain.measures)},
-        "right_cell_fraction": float(np.all(predicted_cells == true_cells, axis=1).mean()),
-        "mean_cell_distance": float(np.abs(predicted_cells - true_cells).sum(axis=1).mean()),
+        "right_cell_fraction": float((predicted_index == true_index).mean()),
+        "mean_cell_distance": float(apart.mean()),
     }

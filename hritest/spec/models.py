@@ -318,7 +318,21 @@ class MeasureSpec(Strict):
     name: Name
     expr: NumericExpr
     range: Interval
-    cells: PositiveInt
+    cells: PositiveInt | None = Field(None, description="cells along this measure, for a grid archive")
+
+
+class ArchiveSpec(Strict):
+    """The archives' cells: a grid (each measure's ``cells``), or a centroidal Voronoi tessellation
+    of ``cells`` cells over all measures, which three or more measures need (a grid's cells grow
+    as a power of the number of measures)."""
+
+    type: Literal["grid", "cvt"] = "grid"
+    cells: Annotated[int, Field(gt=0, le=100_000, strict=True)] | None = Field(
+        None, description="for a cvt archive: its number of cells (centroids)"
+    )
+    samples: Annotated[int, Field(gt=0, le=1_000_000, strict=True)] = Field(
+        100_000, description="for a cvt archive: uniform samples k-means places the centroids with"
+    )
 
 
 class EmitterSettings(Strict):
@@ -351,7 +365,9 @@ class SurrogateSettings(Strict):
     initial_evaluations: PositiveInt = 100
     inner_iterations: PositiveInt = 10_000
     downsample_cells: list[PositiveInt] | None = Field(
-        None, description="cells per measure of the selection archive; one random elite per block is evaluated"
+        None,
+        description="cells per measure of the selection archive (a cvt archive: one number, its cells); one random "
+        "elite per block is evaluated",
     )
     epochs: PositiveInt = 100
     batch_size: BatchSize = 64
@@ -406,6 +422,7 @@ class Spec(Strict):
     human: PolicySpec
     objective: ObjectiveSpec
     measures: list[MeasureSpec] = Field(min_length=1)
+    archive: ArchiveSpec = Field(default_factory=ArchiveSpec)
     failure: ConditionExpr
     search: SearchSpec = Field(default_factory=SearchSpec)
 

@@ -33,7 +33,7 @@ def check_references(spec: Spec, *, metrics: Collection[str] | None = None) -> l
         metrics: the metric names the task provides; ``None`` skips the expression-name check
             (the task plugin is not loaded yet).
     """
-    found = [*_duplicates(spec), *_bindings(spec), *_constraints(spec), *_search(spec), *_sizes(spec)]
+    found = [*_duplicates(spec), *_bindings(spec), *_constraints(spec), *_archive(spec), *_search(spec), *_sizes(spec)]
     found += [*_unusable_names(spec), *_indices(spec)]
     if metrics is not None:
         found += [*_shadowed_metrics(spec, set(metrics)), *_expression_names(spec, set(metrics))]
@@ -160,14 +160,20 @@ def _search(spec: Spec) -> Found:
             (f"has {len(sigma)} values but theta has {dim} components; give one number or {dim}"),
         )
     cells = spec.search.surrogate.downsample_cells
-    if cells is not None:
+    if cells is not None and spec.archive.type == "cvt":
+        if len(cells) != 1 or cells[0] > (spec.archive.cells or 0):
+            yield (
+                ("search", "surrogate", "downsample_cells"),
+                f"with a cvt archive, give one number of selection cells, at most the archive's {spec.archive.cells}",
+            )
+    elif cells is not None:
         if len(cells) != len(spec.measures):
             yield (
                 ("search", "surrogate", "downsample_cells"),
                 (f"has {len(cells)} values, one per measure is needed ({len(spec.measures)})"),
             )
         for i, (n, measure) in enumerate(zip(cells, spec.measures)):
-            if n > measure.cells:
+            if measure.cells is not None and n > measure.cells:
                 yield (
                     ("search", "surrogate", "downsample_cells", i),
                     (f"{n} cells is more than measure {measure.name!r} has ({measure.cells})"),
@@ -200,7 +206,9 @@ def _sizes(spec: Spec) -> Found:
             ("parameters",),
             f"theta has {dim:,} components; a search handles at most {MAX_DIM:,}: reduce the parameters' sizes",
         )
-    cells = math.prod(m.cells for m in spec.measures)
+    if spec.archive.type == "cvt":
+        return
+    cells = math.prod(m.cells or 1 for m in spec.measures)
     if cells > MAX_CELLS:
         product = " x ".join(f"{m.cells:,}" for m in spec.measures)
         yield (
@@ -208,6 +216,31 @@ def _sizes(spec: Spec) -> Found:
             f"the archive would have {product} = {cells:,} cells; at most {MAX_CELLS:,} fit in memory: "
             "reduce the measures' cells",
         )
+
+
+def _archive(spec: Spec) -> Found:
+    """A grid needs each measure's cells and at most two measures; a cvt archive its own cells."""
+    if spec.archive.type == "cvt":
+        if spec.archive.cells is None:
+            yield ("archive",), "a cvt archive needs its number of cells: archive: {type: cvt, cells: 1000}"
+        for i, m in enumerate(spec.measures):
+            if m.cells is not None:
+                yield (
+                    ("measures", i, "cells"),
+                    "a cvt archive has no cells per measure: remove it (archive.cells counts)",
+                )
+        return
+    if len(spec.measures) > 2:
+        yield (
+            ("measures",),
+            f"{len(spec.measures)} measures need a cvt archive (a grid's cells grow as a power of the measures): add "
+            "archive: {type: cvt, cells: 1000} and remove the measures' cells",
+        )
+    for i, m in enumerate(spec.measures):
+        if m.cells is None:
+            yield ("measures", i, "cells"), "a grid archive needs each measure's number of cells, e.g. cells: 20"
+    if spec.archive.cells is not None:
+        yield ("archive", "cells"), "a grid archive's cells are each measure's cells: remove archive.cells"
 
 
 def _unusable_names(spec: Spec) -> Found:
