@@ -148,13 +148,16 @@ def show(spec: SpecArg) -> None:
             table.add_row(str(slot.start + i), label, slot.bind, f"{slot.lower:g}", f"{slot.upper:g}")
     out.print(table)
 
-    archive = Table(
-        title="result archive: " + " x ".join(map(str, domain.archive_dims)) + " cells", title_justify="left"
+    cells = (
+        f"a cvt archive of {domain.archive_cells:,} cells"
+        if s.archive.type == "cvt"
+        else " x ".join(map(str, domain.archive_dims)) + " cells"
     )
+    archive = Table(title=f"result archive: {cells}", title_justify="left")
     for column in ("measure", "expression", "range", "cells"):
         archive.add_column(column)
     for m in domain.measures:
-        archive.add_row(m.name, m.expression.text, f"[{m.range[0]:g}, {m.range[1]:g}]", str(m.cells))
+        archive.add_row(m.name, m.expression.text, f"[{m.range[0]:g}, {m.range[1]:g}]", str(m.cells or "—"))
     out.print(archive)
     out.print(
         f"objective {s.objective.expr} in [{s.objective.range[0]:g}, {s.objective.range[1]:g}] "
