@@ -198,26 +198,16 @@ def _replay(request: dict[str, Any], domains: dict[str, Any]) -> dict[str, Any]:
     import numpy as np
 
     from hritest.evaluate import evaluate
+    from hritest.verdict import SeedReplay
 
     domain = domains[request["replay"]]
     names = [m.name for m in domain.measures]
-    out = []
-    for seed in request["seeds"]:
-        e = evaluate(domain, np.asarray(request["theta"], dtype=float), seed=int(seed))
-        finite = [float(v) if np.isfinite(v) else None for v in e.measures]
-        out.append(
-            {
-                "seed": int(seed),
-                "status": e.status.value,
-                "failure": bool(e.failure),
-                "objective": float(e.objective) if np.isfinite(e.objective) else None,
-                "measures": dict(zip(names, finite)),
-                "theta_repaired": [float(v) for v in e.theta_repaired],
-                "clauses": [c.to_json() for c in e.clauses],
-                "message": e.message,
-            }
-        )
-    return {"replays": out}
+    theta = np.asarray(request["theta"], dtype=float)
+    return {
+        "replays": [
+            SeedReplay.of(evaluate(domain, theta, seed=int(seed)), names).to_json() for seed in request["seeds"]
+        ]
+    }
 
 
 def main() -> None:

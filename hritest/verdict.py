@@ -19,13 +19,14 @@ plugin only maps verdicts to pytest outcomes.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any
 
 from hritest.corpus import Entry
-from hritest.records import Clause, Status, clauses_text
+from hritest.records import Clause, Evaluation, Status, clauses_text
 
 THETA_TOLERANCE = 1e-9  # a stored repaired theta and the one its raw theta repairs to now
 # Changing these parts may legitimately move the repaired theta; otherwise it must not move.
@@ -57,6 +58,32 @@ class SeedReplay:
     @property
     def fired(self) -> tuple[Clause, ...]:
         return tuple(c for c in self.clauses if c.holds)
+
+    @classmethod
+    def of(cls, evaluation: Evaluation, measure_names: Sequence[str]) -> SeedReplay:
+        """The replay an evaluation is (non-finite numbers become None)."""
+        return cls(
+            seed=int(evaluation.seed),
+            status=evaluation.status,
+            failure=bool(evaluation.failure),
+            objective=_finite(evaluation.objective),
+            measures={name: _finite(v) for name, v in zip(measure_names, evaluation.measures)},
+            theta_repaired=tuple(float(v) for v in evaluation.theta_repaired),
+            clauses=evaluation.clauses,
+            message=evaluation.message,
+        )
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "seed": self.seed,
+            "status": self.status.value,
+            "failure": self.failure,
+            "objective": self.objective,
+            "measures": dict(self.measures),
+            "theta_repaired": list(self.theta_repaired),
+            "clauses": [c.to_json() for c in self.clauses],
+            "message": self.message,
+        }
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> SeedReplay:
@@ -182,6 +209,10 @@ def then_now(entry: Entry, replay: SeedReplay) -> str:
         + ("" if replay.seed == entry.seed else f" (seed {replay.seed}; recorded with seed {entry.seed})")
     )
     return "\n".join(lines)
+
+
+def _finite(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
 
 
 __all__ = ["Judgement", "SeedReplay", "Verdict", "changes_since", "error", "judge", "then_now"]
