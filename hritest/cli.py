@@ -148,16 +148,13 @@ def show(spec: SpecArg) -> None:
             table.add_row(str(slot.start + i), label, slot.bind, f"{slot.lower:g}", f"{slot.upper:g}")
     out.print(table)
 
-    cells = (
-        f"a cvt archive of {domain.archive_cells:,} cells"
-        if s.archive.type == "cvt"
-        else " x ".join(map(str, domain.archive_dims)) + " cells"
+    archive = Table(
+        title="result archive: " + " x ".join(map(str, domain.archive_dims)) + " cells", title_justify="left"
     )
-    archive = Table(title=f"result archive: {cells}", title_justify="left")
     for column in ("measure", "expression", "range", "cells"):
         archive.add_column(column)
     for m in domain.measures:
-        archive.add_row(m.name, m.expression.text, f"[{m.range[0]:g}, {m.range[1]:g}]", str(m.cells or "—"))
+        archive.add_row(m.name, m.expression.text, f"[{m.range[0]:g}, {m.range[1]:g}]", str(m.cells))
     out.print(archive)
     out.print(
         f"objective {s.objective.expr} in [{s.objective.range[0]:g}, {s.objective.range[1]:g}] "
@@ -326,12 +323,37 @@ def search(
         str, typer.Option(help="where the surrogate runs: auto, cpu or cuda", rich_help_panel="Surrogate")
     ] = "auto",
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress bar (for CI)")] = False,
+    trust: Annotated[
+        bool,
+        typer.Option(
+            help="with --resume: load a checkpoint and plugin files that you did not write (a run from "
+            "someone you trust, or from an older hritest); the run is signed as yours from then on",
+            rich_help_panel="Run",
+        ),
+    ] = False,
 ) -> None:
     """Search for diverse failures; writes a run directory. Exit 1 if failures were found."""
     from hritest import search as qd
 
     if (spec is None) == (resume is None):
         raise typer.BadParameter("give a SPEC to start a search, or --resume RUN to continue one (not both)")
+    if resume is not None:
+        given = {
+            "--algorithm": algorithm,
+            "--budget": budget,
+            "--seed": seed,
+            "--out": out_dir,
+            "--inner-iterations": inner_iterations,
+            "--device": None if device == "auto" else device,
+        }
+        if ignored := [name for name, value in given.items() if value is not None]:
+            raise typer.BadParameter(
+                f"{', '.join(ignored)} cannot change a run being resumed: it continues with the settings it "
+                "started with (see its run.json). Leave them out, or start a new search",
+                param_hint="--resume",
+            )
+    elif trust:
+        raise typer.BadParameter("only a resumed run is trusted; use it with --resume RUN", param_hint="--trust")
     if workers < 1:
         raise typer.BadParameter(f"must be at least 1, got {workers}", param_hint="--workers")
     if device not in ("auto", "cpu", "cuda"):
@@ -339,7 +361,7 @@ def search(
     backend = qd.Backend(workers=workers, cluster=cluster, timeout=timeout)
     with _progress(quiet) as progress:
         if resume is not None:
-            found = qd.resume(run_path=resume, backend=backend, progress=progress)
+            found = qd.resume(run_path=resume, backend=backend, progress=progress, trust=trust)
         else:
             found = qd.start(
                 spec_file=spec,
@@ -409,21 +431,21 @@ def _print_summary(found) -> None:  # noqa: ANN001 - hritest.search.Search
     from hritest.search.archives import Summary
 
     state = found.state
-    summary = Summary.of(state["result"], found.domain.spec.objective.range)
+    summary = Summary.of(state.result, found.domain.spec.objective.range)
     statuses: dict[str, int] = {}
     for record in found.records.values():
         statuses[record["status"]] = statuses.get(record["status"], 0) + 1
     table = Table(
-        title=f"{found.domain.spec.name}: {state['algorithm']}, seed {state['seed']}",
+        title=f"{found.domain.spec.name}: {state.algorithm}, seed {state.seed}",
         title_justify="left",
         show_header=False,
     )
     rows = [
         ("run directory", str(found.run_dir.path)),
-        ("evaluations", f"{state['evaluations']} ({', '.join(f'{n} {k}' for k, n in sorted(statuses.items()))})"),
-        ("wall time", f"{state['elapsed']:.1f} s"),
+        ("evaluations", f"{state.evaluations} ({', '.join(f'{n} {k}' for k, n in sorted(statuses.items()))})"),
+        ("wall time", f"{state.elapsed:.1f} s"),
         ("QD-score", f"{summary.qd_score:,.2f} (normalised {summary.normalized_qd_score:.4f})"),
-        ("coverage", f"{summary.coverage:.2%} of {found.state['result'].cells} cells"),
+        ("coverage", f"{summary.coverage:.2%} of {state.result.cells} cells"),
         ("best objective", f"{summary.best:.4g}"),
         ("failures", f"{len(found.failures())} elites meet '{found.domain.spec.failure}'"),
     ]

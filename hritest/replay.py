@@ -135,9 +135,13 @@ def _finite(value: float) -> float | None:
 
 
 def run_domain(run: RunDirectory) -> Domain:
-    """The run's own copy of its spec, compiled with plugin paths relative to the original spec."""
-    base = run.meta.get("spec_base")
-    return compile_spec(load_spec(run.path / "spec.yaml"), base=Path(base) if base else None)
+    """The run's own copy of its spec, compiled with plugin paths relative to the original spec.
+
+    Raises:
+        RunDirectoryError: plugin files from outside the user's project in a run another user
+            wrote (see :meth:`RunDirectory.plugin_base`).
+    """
+    return compile_spec(load_spec(run.path / "spec.yaml"), base=run.plugin_base())
 
 
 def failure_ids(run: RunDirectory, records: Sequence[EvaluationRecord]) -> list[int]:

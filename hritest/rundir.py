@@ -3,11 +3,12 @@
 Layout of ``runs/<spec>-<timestamp>/``::
 
     spec.yaml          the spec as it was when the run started
-    run.json           spec digest and origin, algorithm, seed, budget, versions
+    run.json           spec digest and origin, algorithm, seed, budget, versions, signature
     evaluations.jsonl  every finished evaluation, one JSON object a line, append-only
     occupancy.f32      its occupancy grids, fixed-size float32 records in the same order
                        (empty when the task declares no grids: records of size zero)
-    checkpoint.pkl     the search's state at the last step (archives, scheduler, pending batch)
+    checkpoint.pkl     the search's state at the last step (archives, scheduler, pending batch), signed
+    .lock              held (flock) by the one search that writes the run
     progress.csv       evaluations, wall time, QD-score, coverage, best, failures
     archive.csv        the result archive's elites
     failures.yaml      the elites that meet the spec's failure condition
@@ -17,21 +18,37 @@ files may end in a torn record after a kill, which :meth:`RunDirectory.evaluatio
 
 :meth:`RunDirectory.pack` and :func:`unpack` carry a run to another machine as one compressed
 file, for a search that outlives the machine it started on (a long benchmark in a sandbox).
+
+Loading a run executes nothing from it unless this user wrote it. The checkpoint is a pickle,
+because the state it holds is pyribs schedulers, emitters and archives (numpy arrays, generators,
+CMA-ES internals) and torch networks, which have no stable serialised form short of a converter
+for each class and each version of them; so it is signed instead: an HMAC-SHA256 under a per-user
+key (``$XDG_CONFIG_HOME/hritest/signing.key``, else ``~/.config/hritest/signing.key``, created
+0600 on first use) precedes the pickle, and a checkpoint whose signature does not verify is never
+unpickled unless the caller trusts the run. ``run.json`` is signed the same way, so that the
+plugin files a run names (``file.py:Class`` relative to its ``spec_base``) run only when this user
+started the run, when they lie in the user's project, or when the caller trusts the run
+(:meth:`RunDirectory.plugin_base`).
 """
 
 from __future__ import annotations
 
 import csv
+import fcntl
 import hashlib
+import hmac
 import io
 import json
 import lzma
 import os
 import pickle
 import platform
+import secrets
 import shutil
 import tarfile
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -46,6 +63,12 @@ FORMAT = 1
 # The order pack() reads a live run in: the checkpoint before the evaluations it counts, each
 # evaluation's line before its occupancy record (the reverse of the order they are written in).
 PACK_FIRST = ("checkpoint.pkl", "evaluations.jsonl", "occupancy.f32")
+LOCK_FILE = ".lock"  # hidden: pack() leaves it out
+SIGNED = b"hritest signed checkpoint 1\n"  # then the HMAC-SHA256 of the pickle, then the pickle
+MAC_SIZE = hashlib.sha256().digest_size
+# Lock files held by this process, closed in children forked while they are held (pool workers),
+# so that a worker outliving its search does not keep the run locked.
+_HELD_LOCKS: set[int] = set()
 
 
 class RunDirectoryError(HritestError):
@@ -72,6 +95,64 @@ def digest(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
+def key_path() -> Path:
+    """Where this user's signing key lives (XDG: a relative ``XDG_CONFIG_HOME`` is ignored)."""
+    config = os.environ.get("XDG_CONFIG_HOME", "")
+    root = Path(config) if os.path.isabs(config) else Path.home() / ".config"
+    return root / "hritest" / "signing.key"
+
+
+def signing_key() -> bytes:
+    """This user's key for signing run directories, created (0600) on first use.
+
+    Raises:
+        RunDirectoryError: a key that others can read or write, or that is not this user's.
+    """
+    path = key_path()
+    if not path.exists():
+        path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".signing.key.")  # 0600
+        try:
+            with os.fdopen(fd, "wb") as handle:
+                handle.write(secrets.token_bytes(32))
+                handle.flush()
+                os.fsync(handle.fileno())
+            os.link(tmp, path)  # never over a key another process made meanwhile
+        except FileExistsError:
+            pass
+        finally:
+            Path(tmp).unlink(missing_ok=True)
+    status = path.stat()
+    if status.st_uid != os.getuid() or status.st_mode & 0o077:
+        raise RunDirectoryError(
+            f"{path} is readable or writable by others (or not yours): anyone who can read it can make run "
+            f"directories that hritest loads as yours. Run 'chmod 600 {path}' if it is yours, else delete it"
+        )
+    key = path.read_bytes()
+    if len(key) < 32:
+        raise RunDirectoryError(f"{path} is not a signing key (too short); delete it and a new one is made")
+    return key
+
+
+def sign(data: bytes) -> bytes:
+    """HMAC-SHA256 of ``data`` under this user's key."""
+    return hmac.new(signing_key(), data, hashlib.sha256).digest()
+
+
+def _meta_signature(meta: dict[str, Any]) -> str:
+    fields = {k: v for k, v in meta.items() if k != "signature"}
+    return sign(json.dumps(fields, sort_keys=True, separators=(",", ":")).encode()).hex()
+
+
+def _close_held_locks_in_child() -> None:
+    for fd in _HELD_LOCKS:
+        os.close(fd)
+    _HELD_LOCKS.clear()
+
+
+os.register_at_fork(after_in_child=_close_held_locks_in_child)
+
+
 def versions() -> dict[str, str]:
     from importlib.metadata import PackageNotFoundError, version
 
@@ -87,7 +168,7 @@ def versions() -> dict[str, str]:
 class RunDirectory:
     """One search's folder. Create with :meth:`create`, reopen with :meth:`open`."""
 
-    def __init__(self, path: Path, meta: dict[str, Any]):
+    def __init__(self, path: Path, meta: dict[str, Any]) -> None:
         self.path = Path(path)
         self.meta = meta
 
@@ -110,7 +191,9 @@ class RunDirectory:
             "versions": versions(),
             **meta,
         }
+        meta["signature"] = _meta_signature(meta)
         atomic_write(path / RUN_FILE, json.dumps(meta, indent=2))
+        (path / LOCK_FILE).touch()
         return cls(path, meta)
 
     @classmethod
@@ -133,7 +216,102 @@ class RunDirectory:
             raise RunDirectoryError(f"{path / RUN_FILE} is not a hritest run (format {FORMAT}) file")
         if not (path / "spec.yaml").is_file():
             raise RunDirectoryError(f"{path} has no spec.yaml; the run cannot be resumed or reported")
+        for name, kind in (("spec_file", str), ("spec_digest", str), ("spec_base", str), ("seed", int)):
+            if name in meta and not isinstance(meta[name], kind):
+                raise RunDirectoryError(
+                    f"{path / RUN_FILE}: {name} is {meta[name]!r}, not a {kind.__name__}; the file is corrupt"
+                )
         return cls(path, meta)
+
+    # --- provenance and the one writer -------------------------------------------------------
+
+    @property
+    def written_by_me(self) -> bool:
+        """Whether ``run.json`` carries this user's signature: this user started the run."""
+        signature = self.meta.get("signature")
+        return isinstance(signature, str) and hmac.compare_digest(signature, _meta_signature(self.meta))
+
+    def adopt(self) -> None:
+        """Signs ``run.json`` with this user's key: the user vouches for a run someone else wrote."""
+        self.meta = {**self.meta, "signature": _meta_signature(self.meta)}
+        atomic_write(self.path / RUN_FILE, json.dumps(self.meta, indent=2))
+
+    def check_spec(self) -> None:
+        """Checks that ``spec.yaml`` is the spec the run started with (the digest in ``run.json``).
+
+        Raises:
+            RunDirectoryError: it was edited; the message says how to get back.
+        """
+        if digest(self.path / "spec.yaml") != self.meta.get("spec_digest"):
+            raise RunDirectoryError(
+                f"{self.path / 'spec.yaml'} is not the spec this run was started with (its digest differs from "
+                f"the one in {self.path / RUN_FILE}); the evaluations so far belong to the other one. Restore "
+                "the file, or start a new search with the edited spec"
+            )
+
+    def plugin_base(self, *, trust: bool = False) -> Path | None:
+        """The folder the run's ``file.py:Class`` plugin paths are relative to (its ``spec_base``),
+        once it is safe to import them.
+
+        Plugin files named by a run that this user did not start (``run.json`` not signed with
+        this user's key: a run from someone else, or from before runs were signed) must lie in
+        the user's project, which is the current working directory and below it, outside the run
+        directory itself; ``trust`` lifts that.
+
+        Raises:
+            RunDirectoryError: a plugin file outside the project; the message says what to do.
+        """
+        from hritest.plugins import registered
+        from hritest.spec import load_spec
+
+        base = self.meta.get("spec_base")
+        folder = Path(base) if base else self.path
+        if trust or self.written_by_me:
+            return Path(base) if base else None
+        spec = load_spec(self.path / "spec.yaml")
+        project, here = Path.cwd().resolve(), self.path.resolve()
+        for ref in (spec.task.name, spec.robot.policy, spec.human.policy):
+            module = registered().get(ref, ref).rpartition(":")[0]
+            path = (folder / module).resolve()
+            if module.endswith(".py") and (not path.is_relative_to(project) or path.is_relative_to(here)):
+                raise RunDirectoryError(
+                    f"{self.path} was not started by you (its {RUN_FILE} is not signed with your key), and its "
+                    f"spec names the plugin file {path}, which lies outside your project ({project}, the folder "
+                    "you run hritest in, less the run directory): importing it would run code that came with "
+                    "the run. Run hritest from the project that holds the file, or, if you trust whoever "
+                    "wrote this run, resume it with --trust"
+                )
+        return Path(base) if base else None
+
+    @contextmanager
+    def lock(self) -> Iterator[None]:
+        """Holds the run's lock: one search writes a run directory at a time.
+
+        Raises:
+            RunDirectoryError: another process holds it (or the folder cannot be written).
+        """
+        path = self.path / LOCK_FILE
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+        except OSError as exc:
+            raise RunDirectoryError(f"{path} cannot be opened ({exc.strerror}); the run cannot be written") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.read(fd, 32).decode(errors="replace").strip() or "unknown"
+            os.close(fd)
+            raise RunDirectoryError(
+                f"{self.path} is being written by another search (process {holder}); two searches in one run "
+                "would evaluate the same scenarios twice. Wait for it to finish, or stop it and resume then"
+            ) from None
+        _HELD_LOCKS.add(fd)
+        try:
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+            yield
+        finally:
+            _HELD_LOCKS.discard(fd)
+            os.close(fd)  # releases the lock
 
     def pack(self) -> bytes:
         """The whole folder as an xz-compressed tar, safe to take while the search runs.
@@ -207,15 +385,37 @@ class RunDirectory:
 
     # --- state and summaries -----------------------------------------------------------------
 
-    def save_checkpoint(self, state: dict[str, Any]) -> None:
-        atomic_write(self.path / "checkpoint.pkl", pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL))
+    def save_checkpoint(self, state: object) -> None:
+        """Writes ``state`` as the checkpoint, pickled and signed with this user's key."""
+        data = pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL)
+        atomic_write(self.path / "checkpoint.pkl", SIGNED + sign(data) + data)
 
-    def load_checkpoint(self) -> dict[str, Any] | None:
+    def load_checkpoint(self, *, trust: bool = False) -> object | None:
+        """The checkpointed state (``None`` without a checkpoint), unpickled only once its signature
+        shows this user wrote it, or if the caller trusts the run (``trust``).
+
+        Raises:
+            RunDirectoryError: unsigned, signed with another key, altered, or corrupt.
+        """
         path = self.path / "checkpoint.pkl"
         if not path.exists():
             return None
+        raw = path.read_bytes()
+        signed = raw.startswith(SIGNED)
+        data = raw[len(SIGNED) + MAC_SIZE :] if signed else raw
+        if not trust and not (signed and hmac.compare_digest(raw[len(SIGNED) : len(SIGNED) + MAC_SIZE], sign(data))):
+            why = (
+                "its signature does not match your key: another user wrote it, or it was altered since"
+                if signed
+                else "it is not signed: another user wrote it, or a hritest from before checkpoints were signed"
+            )
+            raise RunDirectoryError(
+                f"{path} was not loaded: {why}. Loading a checkpoint runs whatever code it holds, so hritest "
+                f"loads only those signed with your key ({key_path()}). Start a new search; or, if you trust "
+                f"whoever wrote this run, resume it with 'hritest search --resume {self.path} --trust'"
+            )
         try:
-            return pickle.loads(path.read_bytes())
+            return pickle.loads(data)
         except Exception as exc:
             raise RunDirectoryError(f"{path} is corrupt ({type(exc).__name__}); the run cannot be resumed") from None
 

@@ -1,7 +1,8 @@
 """Quality-diversity search over a domain's scenarios, into a run directory.
 
 ``start`` begins a run, ``resume`` continues a killed one; both return the finished
-:class:`Search`, whose run directory holds everything (see :mod:`hritest.rundir`).
+:class:`Search`, whose run directory holds everything (see :mod:`hritest.rundir`). Each holds the
+run's lock for the whole search, so one run directory has one writer.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from hritest.domain import Domain, compile_spec
+from hritest.domain import compile_spec
 from hritest.errors import HritestError
 from hritest.rundir import RunDirectory, RunDirectoryError, digest
 from hritest.search.executor import DomainRef, Evaluator, local_pool
@@ -67,10 +68,11 @@ def start(
     budget: int | None = None,
     seed: int | None = None,
     backend: Backend = Backend(),
-    surrogate: SurrogateOptions = SurrogateOptions(),
+    surrogate: SurrogateOptions | None = None,
     progress: Callable[[Snapshot], None] = lambda s: None,
 ) -> Search:
     """Runs a new search of the spec at ``spec_file``; arguments given override the spec's ``search``."""
+    surrogate = surrogate or SurrogateOptions()
     spec = load_spec(spec_file)
     domain = compile_spec(spec)
     settings = spec.search
@@ -86,38 +88,57 @@ def start(
     evaluator = backend.evaluator(ref)  # before the folder exists: a bad backend leaves nothing behind
     try:
         run = RunDirectory.create(root=root, spec_file=spec_file, name=spec.name, folder=out, meta=meta)
-        search = Search.new(domain=domain, run=run, algorithm=algorithm, budget=budget, seed=seed, options=surrogate)
-        search.run(evaluator, progress)
+        with run.lock():
+            search = Search.new(
+                domain=domain, run=run, algorithm=algorithm, budget=budget, seed=seed, options=surrogate
+            )
+            search.run(evaluator, progress)
     finally:
         evaluator.close()
     return search
 
 
 def resume(
-    *, run_path: Path, backend: Backend = Backend(), progress: Callable[[Snapshot], None] = lambda s: None
+    *,
+    run_path: Path,
+    backend: Backend = Backend(),
+    progress: Callable[[Snapshot], None] = lambda s: None,
+    trust: bool = False,
 ) -> Search:
     """Continues the run at ``run_path`` from its last checkpoint.
 
+    Every file the resume reads is checked first, and nothing in the run changes unless all agree.
+    ``trust`` loads a checkpoint and plugin files that this user did not write (see
+    :mod:`hritest.rundir`), for runs from someone the user trusts; the run becomes the user's
+    (signed with their key), so that reports and replays of it need no further opt-in.
+
     Raises:
-        RunDirectoryError: not a run directory, or its spec changed since the run started.
+        RunDirectoryError: not a run directory; another search writing it; a spec changed since
+            the run started; an unverified checkpoint or plugin file; files that disagree.
     """
     run = RunDirectory.open(run_path)
-    original = Path(run.meta["spec_file"])
-    if original.is_file() and digest(original) != run.meta["spec_digest"]:
+    missing = [k for k in ("spec_file", "spec_digest", "spec_base", "algorithm", "seed") if k not in run.meta]
+    if missing:
         raise RunDirectoryError(
-            f"{original} changed since this run started; resuming would mix two different searches. "
-            f"Start a new run, or restore the spec (the run's copy is {run.path / 'spec.yaml'})"
+            f"{run.path / 'run.json'} lacks {', '.join(missing)}; it was not written by 'hritest search', "
+            "and the run cannot be resumed"
         )
-    domain = _domain_of(run)
-    ref = DomainRef(spec=str(run.path / "spec.yaml"), base=run.meta["spec_base"])
-    evaluator = backend.evaluator(ref)
-    try:
-        search = Search.resume(domain=domain, run=run)
-        search.run(evaluator, progress)
-    finally:
-        evaluator.close()
+    with run.lock():
+        run.check_spec()
+        original = Path(run.meta["spec_file"])
+        if original.is_file() and digest(original) != run.meta["spec_digest"]:
+            raise RunDirectoryError(
+                f"{original} changed since this run started; resuming would mix two different searches. "
+                f"Start a new run, or restore the spec (the run's copy is {run.path / 'spec.yaml'})"
+            )
+        base = run.plugin_base(trust=trust)
+        domain = compile_spec(load_spec(run.path / "spec.yaml"), base=base)
+        evaluator = backend.evaluator(DomainRef(spec=str(run.path / "spec.yaml"), base=run.meta["spec_base"]))
+        try:
+            search = Search.resume(domain=domain, run=run, trust=trust)
+            if trust:
+                run.adopt()
+            search.run(evaluator, progress)
+        finally:
+            evaluator.close()
     return search
-
-
-def _domain_of(run: RunDirectory) -> Domain:
-    return compile_spec(load_spec(run.path / "spec.yaml"), base=Path(run.meta["spec_base"]))

@@ -1,9 +1,10 @@
 """The search loop: ask a batch, evaluate it in parallel, tell the results, checkpoint.
 
 One batch at a time, so a run is reproducible: evaluations stream back in any order, but are
-told to the scheduler in the order they were asked. The state is checkpointed after every ask
-and every tell, and each finished evaluation is appended to the run directory the moment it
-arrives, so a killed run resumes from its last checkpoint and re-evaluates nothing it finished.
+told to the scheduler in the order they were asked. The state (a
+:class:`~hritest.search.state.SearchState`) is checkpointed after every ask and every tell, and each
+finished evaluation is appended to the run directory the moment it arrives, so a killed run resumes
+from its last checkpoint and re-evaluates nothing it finished.
 """
 
 from __future__ import annotations
@@ -11,17 +12,18 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import yaml
 
 from hritest.domain import Domain
 from hritest.records import Evaluation, EvaluationRecord, rank_failures
-from hritest.rundir import RunDirectory
+from hritest.rundir import RunDirectory, RunDirectoryError
 from hritest.search import algorithms, archives
 from hritest.search.executor import Evaluator, Job
 from hritest.search.proposers import ModelFree, SurrogateAssisted, SurrogateOptions
+from hritest.search.state import PendingBatch, ProgressRow, SearchState, check_resumable, evaluation_seed, load_state
 
 SURROGATE = ("sas", "dsas")
 # progress.csv, archive.csv and failures.yaml are rewritten at most this often (and at the end):
@@ -40,23 +42,18 @@ class Snapshot:
     failures: int
 
 
-def evaluation_seed(seed: int, index: int) -> int:
-    """The seed of evaluation ``index``: independent of which worker runs it, or when."""
-    return int(np.random.SeedSequence([seed, index]).generate_state(1)[0])
-
-
 class Search:
     """A model-free QD search over a domain, writing into a run directory.
 
     Build with :meth:`new` or :meth:`resume`; then :meth:`run`.
     """
 
-    def __init__(self, *, domain: Domain, run: RunDirectory, state: dict) -> None:
+    def __init__(
+        self, *, domain: Domain, run: RunDirectory, state: SearchState, records: list[EvaluationRecord]
+    ) -> None:
         self.domain, self.run_dir, self.state = domain, run, state
-        self.records: dict[int, EvaluationRecord] = {r.index: r for r in run.evaluations()}
-        # One record per evaluation: the declared grids stacked (compile_spec admits only 32x32
-        # ones); of size zero for a task without grids.
-        self.occupancy_shape = (len(domain.grids), 32, 32)
+        self.records: dict[int, EvaluationRecord] = {r.index: r for r in records}
+        self.occupancy_shape = occupancy_shape(domain)
         self.summarised = -math.inf
 
     @classmethod
@@ -78,45 +75,44 @@ class Search:
             proposer = ModelFree(
                 algorithms.scheduler(domain, algorithm, archives.search_archive(domain, seed=seed), seed=seed)
             )
-        state = {
-            "algorithm": algorithm,
-            "budget": budget,
-            "seed": seed,
-            "proposer": proposer,
-            "result": archives.result_archive(domain, seed=seed),
-            "evaluations": 0,
-            "batch": 0,
-            "pending": None,
-            "elapsed": 0.0,
-            "progress": [],
-        }
+        state = SearchState(
+            algorithm=algorithm,
+            budget=budget,
+            seed=seed,
+            proposer=proposer,
+            result=archives.result_archive(domain, seed=seed),
+        )
         run.save_checkpoint(state)
-        return cls(domain=domain, run=run, state=state)
+        return cls(domain=domain, run=run, state=state, records=[])
 
     @classmethod
-    def resume(cls, *, domain: Domain, run: RunDirectory) -> Search:
-        state = run.load_checkpoint()
-        if state is None:
-            from hritest.rundir import RunDirectoryError
+    def resume(cls, *, domain: Domain, run: RunDirectory, trust: bool = False) -> Search:
+        """The search of ``run`` as its checkpoint left it, after checking every file it reads.
 
+        Only when every check passes are the evaluations the checkpoint never saw cut off (a
+        torn last line, a batch asked after it); on any error nothing in the run has changed.
+
+        Raises:
+            RunDirectoryError: no checkpoint, one not written by this user (unless ``trust``), or
+                files that disagree (see :func:`~hritest.search.state.check_resumable`).
+        """
+        state = load_state(run, trust=trust)
+        if state is None:
             raise RunDirectoryError(f"{run.path} has no checkpoint.pkl; the run cannot be resumed")
-        search = cls(domain=domain, run=run, state=state)
-        # Keep only what the checkpoint knows of: the told evaluations and the pending batch's.
-        pending = state["pending"]
-        known = state["evaluations"] + (pending["count"] if pending else 0)
-        keep = [r for r in run.evaluations() if r.index < known]
-        run.truncate(len(keep), search.occupancy_shape)  # drops a torn line and its grids
-        search.records = {r.index: r for r in keep}
-        return search
+        records = run.evaluations()
+        shape = occupancy_shape(domain)
+        keep = check_resumable(state, run=run, records=records, dim=domain.space.dim, grid_shape=shape)
+        run.truncate(keep, shape)
+        return cls(domain=domain, run=run, state=state, records=records[:keep])
 
     @property
     def evaluated(self) -> int:
         """Evaluations told so far."""
-        return self.state["evaluations"]
+        return self.state.evaluations
 
     @property
     def done(self) -> bool:
-        return self.state["evaluations"] >= self.state["budget"]
+        return self.state.evaluations >= self.state.budget
 
     def run(self, evaluator: Evaluator, progress: Callable[[Snapshot], None] = lambda s: None) -> None:
         """Runs batches until the budget is spent."""
@@ -127,21 +123,16 @@ class Search:
         """One batch: ask (unless a resumed batch is pending), evaluate what is missing, tell."""
         started = time.monotonic()
         state = self.state
-        if state["pending"] is None:
-            solutions = state["proposer"].ask(self)
-            state["batch"] += 1
-            count = min(len(solutions), state["budget"] - state["evaluations"])
-            state["pending"] = {
-                "batch": state["batch"],
-                "solutions": solutions,
-                "first": state["evaluations"],
-                "count": count,
-            }
+        if state.pending is None:
+            solutions = state.proposer.ask(self)
+            count = min(len(solutions), state.budget - state.evaluations)
+            pending = PendingBatch(batch=state.batch + 1, solutions=solutions, first=state.evaluations, count=count)
+            self.state = state = replace(state, batch=pending.batch, pending=pending)
             self.run_dir.save_checkpoint(state)
-        pending = state["pending"]
-        first, count, batch = pending["first"], pending["count"], pending["batch"]
+        pending = state.pending
+        first, count, batch = pending.first, pending.count, pending.batch
         jobs = [
-            Job(first + i, pending["solutions"][i], evaluation_seed(state["seed"], first + i))
+            Job(first + i, pending.solutions[i], evaluation_seed(state.seed, first + i))
             for i in range(count)
             if first + i not in self.records
         ]
@@ -157,36 +148,35 @@ class Search:
 
         evaluator.run(jobs, finished)
         records = [self.records[first + i] for i in range(count)]
-        self.state["proposer"].tell(self, records, pending["solutions"])
+        state.proposer.tell(self, records, pending.solutions)
         self._add_to_result(records)
-        state["evaluations"] += count
-        state["pending"] = None
-        state["elapsed"] += time.monotonic() - started
-        summary = archives.Summary.of(state["result"], self.domain.spec.objective.range)
+        summary = archives.Summary.of(state.result, self.domain.spec.objective.range)
         failures = self.failures()
-        state["progress"].append(
-            {
-                "evaluations": state["evaluations"],
-                "batch": batch,
-                "wall_time": round(state["elapsed"], 3),
-                "qd_score": summary.qd_score,
-                "normalized_qd_score": summary.normalized_qd_score,
-                "coverage": summary.coverage,
-                "best": summary.best,
-                "failures": len(failures),
-            }
+        elapsed = state.elapsed + time.monotonic() - started
+        row = ProgressRow(
+            evaluations=state.evaluations + count,
+            batch=batch,
+            wall_time=round(elapsed, 3),
+            qd_score=summary.qd_score,
+            normalized_qd_score=summary.normalized_qd_score,
+            coverage=summary.coverage,
+            best=summary.best,
+            failures=len(failures),
+        )
+        self.state = state = replace(
+            state, evaluations=row.evaluations, pending=None, elapsed=elapsed, progress=(*state.progress, row)
         )
         self.run_dir.save_checkpoint(state)
         if self.done or time.monotonic() - self.summarised >= SUMMARY_SECONDS:
             self.write_summaries(failures)
             self.summarised = time.monotonic()
-        progress(Snapshot(state["evaluations"], state["budget"], summary, len(failures)))
+        progress(Snapshot(state.evaluations, state.budget, summary, len(failures)))
 
     def _add_to_result(self, records: list[EvaluationRecord]) -> None:
         """Adds the successful evaluations to the result archive with their raw objective."""
         good = [r for r in records if r.ok]
         if good:
-            self.state["result"].add(
+            self.state.result.add(
                 np.array([r.theta_repaired for r in good]),
                 np.array([r.objective for r in good]),
                 np.array([r.measures for r in good]),
@@ -214,18 +204,18 @@ class Search:
         return theta, grids[[i for i, _ in rows]], targets
 
     def snapshot(self, extra: int = 0) -> Snapshot:
-        return Snapshot(self.state["evaluations"] + extra, self.state["budget"], None, 0)
+        return Snapshot(self.state.evaluations + extra, self.state.budget, None, 0)
 
     def failures(self) -> list[EvaluationRecord]:
         """The result archive's elites that meet the failure condition, worst first."""
-        return rank_failures(self.records[int(i)] for i in self.state["result"].data("evaluation"))
+        return rank_failures(self.records[int(i)] for i in self.state.result.data("evaluation"))
 
     def write_summaries(self, failures: list[EvaluationRecord]) -> None:
         names = [m.name for m in self.domain.measures]
         labels = self.domain.space.labels
-        self.run_dir.write_csv("progress.csv", self.state["progress"])
+        self.run_dir.write_csv("progress.csv", self.state.progress_rows())
         elites = sorted(
-            (self.records[int(i)] for i in self.state["result"].data("evaluation")),
+            (self.records[int(i)] for i in self.state.result.data("evaluation")),
             key=lambda r: (-r.objective, r.index),
         )
         self.run_dir.write_csv(
@@ -264,3 +254,9 @@ class Search:
                 sort_keys=False,
             ),
         )
+
+
+def occupancy_shape(domain: Domain) -> tuple[int, int, int]:
+    """One ``occupancy.f32`` record: the declared grids stacked (compile_spec admits only 32x32
+    ones); of size zero for a task without grids."""
+    return (len(domain.grids), 32, 32)

@@ -34,7 +34,7 @@ def test_a_cluster_search_gives_the_same_archive_as_a_local_one(toy_spec, tmp_pa
         backend=qd.Backend(workers=2, timeout=10),
     )
     assert (tmp_path / "remote" / "archive.csv").read_text() == (tmp_path / "local" / "archive.csv").read_text()
-    assert remote.state["evaluations"] == local.state["evaluations"] == 300
+    assert remote.state.evaluations == local.state.evaluations == 300
 
 
 def test_a_plugin_crash_on_a_cluster_fails_its_scenario_only(toy_spec, tmp_path, cluster):

@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +19,7 @@ from typer.testing import CliRunner
 from hritest import search as qd
 from hritest.cli import app
 from hritest.rundir import RunDirectory, RunDirectoryError, unpack
+from hritest.search.state import load_state
 
 runner = CliRunner()
 TWO = qd.Backend(workers=2, timeout=20)
@@ -45,14 +47,14 @@ def test_each_algorithm_fills_both_archives_and_the_run_directory(toy_spec, tmp_
     records = RunDirectory.open(run).evaluations()
     assert sorted(r["index"] for r in records) == list(range(250))  # exactly the budget, none twice
     assert all(r["status"] == "ok" for r in records)
-    assert found.state["result"].stats.num_elites > 1
+    assert found.state.result.stats.num_elites > 1
     # The result archive holds raw objectives; the regularised ones only differ by the repair cost.
     for r in records:
         assert r["search_objective"] == pytest.approx(r["objective"] - r["repair_cost"])
     failures = yaml.safe_load((run / "failures.yaml").read_text())["failures"]
     assert all(f["objective"] >= 8 for f in failures)
     assert len(failures) == sum(
-        r["failure"] for r in records if r["index"] in {int(i) for i in found.state["result"].data("evaluation")}
+        r["failure"] for r in records if r["index"] in {int(i) for i in found.state.result.data("evaluation")}
     )
 
 
@@ -63,7 +65,7 @@ def test_same_spec_and_seed_give_the_same_result_archive(toy_spec, tmp_path):
     qd.start(spec_file=spec, out=tmp_path / "c", budget=400, seed=8, backend=TWO)
     assert elites(tmp_path / "a") == elites(tmp_path / "b")
     assert elites(tmp_path / "a") != elites(tmp_path / "c")
-    assert a.state["result"].stats.qd_score == b.state["result"].stats.qd_score
+    assert a.state.result.stats.qd_score == b.state.result.stats.qd_score
 
 
 @pytest.mark.parametrize(
@@ -89,7 +91,7 @@ def test_a_misbehaving_plugin_fails_its_scenarios_only(toy_spec, tmp_path, fault
     assert all("retry" in r["message"] for r in bad)
     if fault == "raise":
         assert "task plugin ToyTask raised RuntimeError: toy plugin exploded" in bad[0]["message"]
-    elites_ = {int(i) for i in found.state["result"].data("evaluation")}
+    elites_ = {int(i) for i in found.state.result.data("evaluation")}
     assert elites_.isdisjoint(r["index"] for r in bad)
 
 
@@ -185,7 +187,7 @@ def test_resume_refuses_bad_run_directories(toy_spec, tmp_path):
     qd.start(spec_file=spec, out=tmp_path / "run", budget=20, seed=0, algorithm="random", backend=TWO)
     (tmp_path / "run" / "checkpoint.pkl").write_bytes(b"garbage")
     result = runner.invoke(app, ["search", "--resume", str(tmp_path / "run")])
-    assert result.exit_code == 2 and "corrupt" in result.output
+    assert result.exit_code == 2 and "not signed" in result.output
 
     qd.start(spec_file=spec, out=tmp_path / "run2", budget=20, seed=0, algorithm="random", backend=TWO)
     spec.write_text(spec.read_text().replace("budget: 500", "budget: 501"))
@@ -240,20 +242,18 @@ def test_sas_and_dsas_search_a_task_without_grids_and_resume(toy_spec, tmp_path,
         surrogate=qd.SurrogateOptions(device="cpu"),
     )
     assert found.domain.grids == {}
-    proposer = found.state["proposer"]
+    proposer = found.state.proposer
     assert proposer.surrogate.occupancy is None and proposer.outer >= 2
     assert all(np.isnan(f["occupancy_loss"]) and np.isfinite(f["predictor_loss"]) for f in proposer.fits)
     assert np.isfinite(proposer.accuracy(found.domain)["objective_mae"])
     assert (tmp_path / "run" / "occupancy.f32").stat().st_size == 0
 
     run = RunDirectory.open(tmp_path / "run")
-    state = run.load_checkpoint()
-    state["budget"] = 80
-    run.save_checkpoint(state)
+    run.save_checkpoint(replace(load_state(run), budget=80))
     again = qd.resume(run_path=tmp_path / "run", backend=TWO)
-    assert again.state["evaluations"] == 80
+    assert again.state.evaluations == 80
     assert sorted(r["index"] for r in RunDirectory.open(tmp_path / "run").evaluations()) == list(range(80))
-    assert again.state["proposer"].outer > proposer.outer
+    assert again.state.proposer.outer > proposer.outer
 
     from hritest.report import load_run, write_report
 

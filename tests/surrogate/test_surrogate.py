@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +16,7 @@ from hritest.domain import compile_spec
 from hritest.evaluate import evaluate
 from hritest.rundir import RunDirectory
 from hritest.search.inner import SurrogateObjective, downsample, exploit
+from hritest.search.state import load_state
 from hritest.spec import load_spec
 from hritest.surrogate.model import Surrogate
 from hritest.surrogate.networks import OccupancyNet, PredictNet
@@ -194,19 +196,17 @@ def test_a_tiny_run_completes_and_resumes(tmp_path, algorithm):
     found = tiny_run(tmp_path, "run", algorithm)
     records = RunDirectory.open(tmp_path / "run").evaluations()
     assert sorted(r["index"] for r in records) == list(range(60))
-    assert found.state["proposer"].outer >= 2
-    accuracy = found.state["proposer"].accuracy(found.domain)
+    assert found.state.proposer.outer >= 2
+    accuracy = found.state.proposer.accuracy(found.domain)
     assert accuracy["held_out"] > 0 and np.isfinite(accuracy["objective_mae"])
     assert (tmp_path / "run" / "surrogate.json").is_file()
     assert json.loads((tmp_path / "run" / "run.json").read_text())["inner_iterations"] == 20  # the spec's
 
     # Resume after the run "was killed" right after asking a batch: rewind to an earlier checkpoint.
     run = RunDirectory.open(tmp_path / "run")
-    state = run.load_checkpoint()
-    state["budget"] = 80
-    run.save_checkpoint(state)
+    run.save_checkpoint(replace(load_state(run), budget=80))
     again = qd.resume(run_path=tmp_path / "run", backend=qd.Backend(workers=2, timeout=60))
-    assert again.state["evaluations"] == 80
+    assert again.state.evaluations == 80
     assert sorted(r["index"] for r in RunDirectory.open(tmp_path / "run").evaluations()) == list(range(80))
 
 
@@ -288,7 +288,7 @@ def test_incremental_training_sees_the_new_samples_and_as_many_old_ones(tmp_path
         backend=qd.Backend(workers=2, timeout=60),
         surrogate=qd.SurrogateOptions(device="cpu"),
     )
-    proposer = found.state["proposer"]
+    proposer = found.state.proposer
     assert len(proposer.fits) >= 2 and proposer.fits[0]["samples"] == 30  # the first round: every sample
     # Later rounds: the samples new since the last round, and as many old ones (at least a batch).
     rows = proposer._rows(proposer.trained + 10)
