@@ -112,7 +112,8 @@ def main() -> None:
         f"{args.spec.name}: {args.evals} evaluations, {args.seeds} seeds, inner iterations "
         f"{inner_iterations:,} (SAS, DSAS), {args.workers} workers",
         "",
-        "| algorithm | QD-score | normalised QD-score | coverage | best | wall s | evaluations / s | QD-score / Random |",
+        "| algorithm | QD-score | normalised QD-score | coverage | best | wall s | evaluations / s "
+        "| QD-score / Random |",
         "|---|---|---|---|---|---|---|---|",
     ]
     for algorithm, rows in results.items():

@@ -51,7 +51,8 @@ def main() -> None:
     toy = ROOT / "tests" / "fixtures" / "toy.yaml"
     timed_run(toy, algorithm="cma_mae", budget=300, workers=1)  # warm caches (numba JIT, imports)
     print(
-        "| machinery (toy domain, CMA-MAE, 1 worker) | evaluations | wall s | in evaluations s | overhead ms / evaluation |"
+        "| machinery (toy domain, CMA-MAE, 1 worker) | evaluations | wall s | in evaluations s "
+        "| overhead ms / evaluation |"
     )
     print("|---|---|---|---|---|")
     wall, inside = timed_run(toy, algorithm="cma_mae", budget=args.budget, workers=1)

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import itertools
 import json
 import shutil
 from pathlib import Path
@@ -56,7 +57,7 @@ def outer_seconds(run: Path) -> list[float]:
     with open(run / "progress.csv") as handle:
         rows = list(csv.DictReader(handle))
     times = [float(r["wall_time"]) for r in rows]
-    return [b - a for a, b in zip(times, times[1:])]
+    return [b - a for a, b in itertools.pairwise(times)]
 
 
 def main() -> None:
@@ -70,11 +71,11 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("benchmark-runs/surrogate-cost"))
     args = parser.parse_args()
     rows = []
-    for name, settings in SCHEDULES.items():
+    for name, schedule in SCHEDULES.items():
         folder = args.out / name.replace(" ", "").replace("+", "-")
         shutil.rmtree(folder, ignore_errors=True)
         folder.mkdir(parents=True)
-        settings = {**settings, **({"inner_stall": args.stall} if "inner_stall" in settings else {})}
+        settings = {**schedule, **({"inner_stall": args.stall} if "inner_stall" in schedule else {})}
         spec = spec_with(args.spec, folder, settings)
         found = qd.start(
             spec_file=spec,

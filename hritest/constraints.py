@@ -64,7 +64,7 @@ class ScenarioRepair:
     move what the search does not control.
     """
 
-    def __init__(self, *, spec: Spec, space: ScenarioSpace):
+    def __init__(self, *, spec: Spec, space: ScenarioSpace) -> None:
         self._lower, self._upper = space.lower, space.upper
         self._clip_groups = _clip_groups(spec, space)
         self._problem, self._columns, self._nominal = _program(spec, space)

@@ -139,7 +139,8 @@ def _grid_declaration(cls: type, name: str) -> list[str]:
     grids = getattr(cls, "grids", {})
     if not isinstance(grids, Mapping):
         return [
-            f"{name}: the grids class attribute must map each grid's name to its shape, e.g. grids = {{'robot': (32, 32)}}; "
+            f"{name}: the grids class attribute must map each grid's name to its shape, "
+            f"e.g. grids = {{'robot': (32, 32)}}; "
             f"it is {grids!r}"
         ]
     return [

@@ -53,7 +53,7 @@ def format_path(path: tuple[str | int, ...]) -> str:
 class SpecError(HritestError):
     """A spec that cannot be used, with every issue found and where it stands in the file."""
 
-    def __init__(self, issues: list[Issue] | Issue, *, file: str | None = None):
+    def __init__(self, issues: list[Issue] | Issue, *, file: str | None = None) -> None:
         self.issues = [issues] if isinstance(issues, Issue) else list(issues)
         self.file = file
         super().__init__(str(self))

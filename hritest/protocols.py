@@ -72,7 +72,7 @@ class TaskContext:
     @property
     def ticks(self) -> int:
         """Ticks in the time limit."""
-        return int(round(self.time_limit / self.dt))
+        return round(self.time_limit / self.dt)
 
 
 @dataclass(frozen=True, kw_only=True)

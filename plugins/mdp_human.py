@@ -39,7 +39,7 @@ OBSTACLE_REWARD = -1.0
 GOAL_VALUE = 1.0
 
 
-class ValueIterationDiverged(RuntimeError):
+class ValueIterationError(RuntimeError):
     """Soft value iteration did not reach its tolerance; the reference fails the scenario."""
 
 
@@ -234,7 +234,7 @@ def soft_value_iteration(
     Raises:
         ValueError: for a non-positive ``tau``, ``gamma`` outside (0, 1], ``max_iter < 1``, or
             a mask of the wrong shape.
-        ValueIterationDiverged: if ``tol`` is not reached within ``max_iter`` sweeps.
+        ValueIterationError: if ``tol`` is not reached within ``max_iter`` sweeps.
     """
     obstacles = np.array(obstacles, dtype=bool)
     if obstacles.shape != grid.shape:
@@ -250,7 +250,7 @@ def soft_value_iteration(
 
     values = np.zeros(obstacles.size)
     values[goal_flat] = GOAL_VALUE
-    for iteration in range(1, max_iter + 1):
+    for iteration in range(1, max_iter + 1):  # noqa: B007 - read after the loop: the sweeps it took
         new = _soft_max(reward + gamma * values[next_flat], tau)
         new[goal_flat] = GOAL_VALUE
         change = np.abs(new - values).sum() / (values.size - 1)
@@ -258,7 +258,7 @@ def soft_value_iteration(
         if change < tol:
             break
     else:
-        raise ValueIterationDiverged(
+        raise ValueIterationError(
             f"soft value iteration did not converge in {max_iter} sweeps (mean |dV| = {change:.3g} >= {tol})"
         )
 

@@ -160,7 +160,7 @@ def test_series_are_scalars_over_their_own_ticks(full):
 
 
 def test_states_are_logged_on_change_and_events_end_with_the_verdict(full):
-    path, rollout = full
+    path, _ = full
     entities = recorded_entities(path)
     assert entities["states/robot"] == [0.0, pytest.approx(3 * DT), pytest.approx(9 * DT)]
     assert entities["states/human"] == [0.0]

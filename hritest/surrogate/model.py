@@ -30,6 +30,7 @@ constant on the teleoperation spec (``benchmarks/README.md``, "Search quality"):
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -150,7 +151,12 @@ class Surrogate:
         return Fit(occupancy_loss, predictor_loss, len(x))
 
     def _epochs(
-        self, generator: torch.Generator, n: int, batch: int, optimizer: torch.optim.Optimizer, loss_of
+        self,
+        generator: torch.Generator,
+        n: int,
+        batch: int,
+        optimizer: torch.optim.Optimizer,
+        loss_of: Callable[[torch.Tensor], torch.Tensor],
     ) -> float:
         mean = math.nan
         for _ in range(self.epochs):

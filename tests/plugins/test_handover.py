@@ -88,7 +88,7 @@ def test_bounds_the_plugins_params_reject_are_caught_when_compiling(tmp_path):
     shutil.copytree(SPECS / "models", tmp_path / "models")
     text = SPEC.read_text().replace("robot.max_speed, bounds: [0.1, 0.35]", "robot.max_speed, bounds: [0.1, 1.5]")
     (tmp_path / "handover.yaml").write_text(text)
-    with pytest.raises(SpecError, match="ReachingRobot.Params rejects max_speed = 1.5"):
+    with pytest.raises(SpecError, match=r"ReachingRobot\.Params rejects max_speed = 1\.5"):
         compile_spec(load_spec(tmp_path / "handover.yaml"))
 
 
@@ -134,7 +134,7 @@ def test_out_of_reach_the_arm_stretches_towards_the_hand_and_waits_at_its_edge()
 
 
 def test_the_end_effector_tracks_the_hand():
-    evaluation, rollout = run(NOMINAL)
+    _, rollout = run(NOMINAL)
     distance = rollout.series["distance/ee_hand"]
     ee, hand = rollout.trajectories["robot/ee"], rollout.trajectories["human/hand"]
     np.testing.assert_allclose(distance, np.linalg.norm(ee - hand, axis=1))
@@ -226,7 +226,7 @@ def test_the_scene_trace_shows_the_hand_and_the_end_effector_where_the_trajector
             positions[replay.bodies.index("hand")], rollout.trajectories["human/hand"][tick], atol=1e-12
         )
     # The tool's last link ends 0.05 m short of the ee site, along the tool's axis.
-    positions, quats = replay.poses(replay.ticks - 1)
+    positions, _ = replay.poses(replay.ticks - 1)
     link7 = positions[replay.bodies.index("arm/link7")]
     assert np.linalg.norm(link7 - rollout.trajectories["robot/ee"][-1]) == pytest.approx(0.05, abs=1e-9)
 

@@ -161,7 +161,8 @@ def test_comparing_two_runs(run, calm_run, tmp_path, monkeypatch):
     assert "comparison of 2 runs" in page
     assert page.count("data:image/png;base64,") == 2  # shared curves, archives side by side
     for folder in (run, calm_run):
-        last = list(csv.DictReader(open(folder / "progress.csv", newline="")))[-1]
+        with open(folder / "progress.csv", newline="") as handle:
+            last = list(csv.DictReader(handle))[-1]
         assert f"{float(last['qd_score']):.2f}" in page
     assert "different specs" in page  # the two toy specs differ in their failure condition
     assert (tmp_path / "report-compare" / "summary.md").is_file()

@@ -9,7 +9,7 @@ from scipy.optimize import lsq_linear
 from hritest.sim.control import _bvls, twist_to_joint_velocity
 
 SPEEDS = np.full(6, 0.8)
-FREE = dict(lower=np.full(6, -np.inf), upper=np.full(6, np.inf), velocity_limits=SPEEDS)
+FREE = {"lower": np.full(6, -np.inf), "upper": np.full(6, np.inf), "velocity_limits": SPEEDS}
 
 
 def jacobian(seed: int = 0) -> np.ndarray:
@@ -17,27 +17,27 @@ def jacobian(seed: int = 0) -> np.ndarray:
 
 
 def test_a_reachable_twist_is_met_exactly():
-    J, twist = jacobian(), np.array([0.05, -0.02, 0.01, 0.0, 0.1, 0.0])
-    qdot, limit_reached = twist_to_joint_velocity(J, twist, np.zeros(6), **FREE)
-    np.testing.assert_allclose(J @ qdot, twist, atol=1e-12)
+    jac, twist = jacobian(), np.array([0.05, -0.02, 0.01, 0.0, 0.1, 0.0])
+    qdot, limit_reached = twist_to_joint_velocity(jac, twist, np.zeros(6), **FREE)
+    np.testing.assert_allclose(jac @ qdot, twist, atol=1e-12)
     assert not limit_reached
 
 
 def test_a_fast_twist_is_bounded_then_scaled_to_95_percent():
-    J, twist = jacobian(), np.array([2.0, 0.0, 0.0, 0.0, 0.0, 0.0])
-    qdot, _ = twist_to_joint_velocity(J, twist, np.zeros(6), **FREE)
+    jac, twist = jacobian(), np.array([2.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    qdot, _ = twist_to_joint_velocity(jac, twist, np.zeros(6), **FREE)
     assert np.max(np.abs(qdot) / SPEEDS) == pytest.approx(0.95)
     # It is the bounded optimum, scaled: the direction matches lsq_linear's solution.
-    best = lsq_linear(J, twist, bounds=(-SPEEDS, SPEEDS)).x
+    best = lsq_linear(jac, twist, bounds=(-SPEEDS, SPEEDS)).x
     np.testing.assert_allclose(qdot, best * 0.95 / np.max(np.abs(best) / SPEEDS), atol=1e-6)
 
 
 def test_no_motion_further_into_a_limit_within_the_margin():
-    J = np.eye(6)
+    jac = np.eye(6)
     lower, upper = np.full(6, -1.0), np.full(6, 1.0)
     q = np.array([0.98, -0.98, 0.5, 0.0, 0.0, 0.0])  # joint 0 near upper, joint 1 near lower
     twist = np.full(6, 0.1)
-    qdot, _ = twist_to_joint_velocity(J, twist, q, lower=lower, upper=upper, velocity_limits=SPEEDS)
+    qdot, _ = twist_to_joint_velocity(jac, twist, q, lower=lower, upper=upper, velocity_limits=SPEEDS)
     assert qdot[0] == 0.0  # would go further up: blocked
     assert qdot[1] == pytest.approx(0.1)  # moves away from its lower limit: allowed
     np.testing.assert_allclose(qdot[2:], 0.1)
@@ -94,9 +94,9 @@ def test_limit_reached_is_the_translation_ratio_test(twist, expected):
 
 
 def test_a_singular_jacobian_still_gives_finite_velocities():
-    J = jacobian()
-    J[:, 5] = J[:, 4]  # two joints doing the same thing
-    qdot, _ = twist_to_joint_velocity(J, np.full(6, 0.05), np.zeros(6), **FREE)
+    jac = jacobian()
+    jac[:, 5] = jac[:, 4]  # two joints doing the same thing
+    qdot, _ = twist_to_joint_velocity(jac, np.full(6, 0.05), np.zeros(6), **FREE)
     assert np.all(np.isfinite(qdot)) and np.all(np.abs(qdot) <= 0.95 * SPEEDS + 1e-12)
 
 

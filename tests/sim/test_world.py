@@ -36,18 +36,18 @@ PERSISTING = 40  # ticks (1 s) of limit_reached in a row: the arm is stuck, not 
 
 def reference_layout(**changes) -> WorldLayout:
     """The reference's scene: side table, the two workspace slabs, two goal boxes, a hand."""
-    fields = dict(
-        table=Box(name="table", center=(0.65, -0.175, 0.845), half_size=(0.2, 0.5, 0.021)),
-        regions=(
+    fields = {
+        "table": Box(name="table", center=(0.65, -0.175, 0.845), half_size=(0.2, 0.5, 0.021)),
+        "regions": (
             Box(name="ws1", center=(0.595, 0.05, 0.86), half_size=(0.13, 0.18, 0.021)),
             Box(name="ws2", center=(0.22, 0.625, 0.86), half_size=(0.13, 0.18, 0.021)),
         ),
-        objects=(
+        "objects": (
             Box(name="goal0", center=(0.6, 0.05, 0.96), half_size=(0.032,) * 3),
             Box(name="goal1", center=(0.218, 0.626, 0.96), half_size=(0.032,) * 3),
         ),
-        hand_start=(0.91, 0.05, 0.96),
-    )
+        "hand_start": (0.91, 0.05, 0.96),
+    }
     return WorldLayout(**(fields | changes))
 
 
@@ -511,7 +511,7 @@ def test_a_world_without_an_arm_says_so(scene):
         lambda: world.set_q([0.0]),
         lambda: world.q,
     ):
-        with pytest.raises(HritestError, match="no arm: set world.arm in the spec"):
+        with pytest.raises(HritestError, match=r"no arm: set world\.arm in the spec"):
             use()
 
 
