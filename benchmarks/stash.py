@@ -3,7 +3,9 @@
 The paper's protocol takes ~14 h on a 2-core CPU: several sittings, and the folder a run lives
 in does not outlive the machine. ``save`` packs the run directory (safely, while it runs) into an
 xz-compressed tar; commit that file. On a new machine, ``restore`` unpacks it, and the same
-``compare.py`` command with the same ``--out`` resumes the run from the packed checkpoint::
+``compare.py`` command with the same ``--out`` resumes the run from the packed checkpoint, which
+``restore`` signs with the new machine's key (hritest loads only checkpoints signed by their user,
+see :mod:`hritest.rundir`), so restore only files you packed yourself::
 
     python benchmarks/stash.py save /work/runs/teleop-paper/sas-s0 benchmarks/results/teleop-paper-sas-s0.tar.xz
     python benchmarks/stash.py restore benchmarks/results/teleop-paper-sas-s0.tar.xz /work/runs/teleop-paper
@@ -37,6 +39,7 @@ def main() -> None:
             print(f"{args.run} -> {args.file} ({len(data) / 2**20:.1f} MiB)")
         else:
             run = unpack(args.file, args.into)
+            run.adopt()  # your own run, packed on another machine: signed with this machine's key
             print(f"{args.file} -> {run.path}; resume it with the compare.py command that started it")
     except HritestError as exc:
         sys.exit(f"error: {exc}")

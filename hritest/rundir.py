@@ -232,9 +232,15 @@ class RunDirectory:
         return isinstance(signature, str) and hmac.compare_digest(signature, _meta_signature(self.meta))
 
     def adopt(self) -> None:
-        """Signs ``run.json`` with this user's key: the user vouches for a run someone else wrote."""
+        """Signs ``run.json`` and the checkpoint with this user's key, unread: the user vouches for
+        a run written by someone else, or by themselves on another machine (a packed run)."""
         self.meta = {**self.meta, "signature": _meta_signature(self.meta)}
         atomic_write(self.path / RUN_FILE, json.dumps(self.meta, indent=2))
+        path = self.path / "checkpoint.pkl"
+        if path.exists():
+            raw = path.read_bytes()
+            data = raw[len(SIGNED) + MAC_SIZE :] if raw.startswith(SIGNED) else raw
+            atomic_write(path, SIGNED + sign(data) + data)
 
     def check_spec(self) -> None:
         """Checks that ``spec.yaml`` is the spec the run started with (the digest in ``run.json``).
