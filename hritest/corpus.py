@@ -38,7 +38,7 @@ import json
 import math
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -404,6 +404,21 @@ def promote(run_path: Path, *, corpus: Path, top: int | None = None) -> list[Pro
             atomic_write(path, dump_entry(data))
         done.append(Promoted(path=path, evaluation=index, objective=record.objective, added=added))
     return done
+
+
+def new_failures(found: Any, held: Collection[str]) -> list[str]:
+    """The failures of a finished search (a :class:`hritest.search.Search`) whose scenario digest is not
+    in ``held``, one line each: its id in the corpus, objective, measures and the clauses that held."""
+    spec_digest = found.run_dir.meta["spec_digest"]
+    names = [m.name for m in found.domain.measures]
+    lines = []
+    for record in found.failures():
+        scenario = scenario_digest(spec_digest, record.theta_repaired, record.seed)
+        if scenario not in held:
+            measures = "  ".join(f"{n} {v:.4g}" for n, v in zip(names, record.measures))
+            why = "; ".join(map(str, record.fired))
+            lines.append(f"  {scenario[:12]}  objective {record.objective:.6g}  {measures}  fails {why}")
+    return lines
 
 
 def chosen(failures: Sequence[Any], top: int | None) -> list[int]:

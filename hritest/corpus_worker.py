@@ -215,7 +215,9 @@ def main() -> None:
     import traceback
 
     from hritest.errors import HritestError
+    from hritest.search.executor import _die_with_parent  # the pool workers' own: one way to do it
 
+    _die_with_parent()  # a worker hanging in a plugin must not outlive pytest
     answers = os.fdopen(os.dup(1), "w")
     os.dup2(2, 1)  # what plugins print goes to stderr, never into the answers
     domains: dict[str, Any] = {}

@@ -27,7 +27,7 @@ An entry is replayed whatever changed since it was recorded; what changed is sho
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -35,12 +35,12 @@ import pytest
 
 from hritest import corpus as hc
 from hritest.errors import HritestError
+from hritest.pytest_fixture import hri_scenario  # noqa: F401 - a fixture: pytest finds it in this plugin
 
 # The summary's order; the first four are always counted.
 OUTCOMES = ("regression", "still failing", "now passing", "flaky", "passing", "error", "search with new failures")
 
 _corpus_key = pytest.StashKey[Path]()
-_domains_key = pytest.StashKey[dict]()
 _worker_key = pytest.StashKey[Any]()
 
 
@@ -121,7 +121,6 @@ def pytest_configure(config: pytest.Config) -> None:
             f"{config.rootpath}); give the folder that holds <spec>/<id>.yaml entries"
         )
     config.stash[_corpus_key] = corpus = corpus.resolve()
-    config.stash[_domains_key] = {}
     config.pluginmanager.register(_Summary(config), "hritest-summary")
     # A corpus outside the paths pytest collects (testpaths, say) is still replayed when no path was
     # given, or when --hri-corpus names it.
@@ -322,14 +321,13 @@ class SearchItem(pytest.Item):
         super().__init__(**kwargs)
         self.spec, self.budget = spec, budget
         self.spec_name = entries[0].entry.spec_name
-        self.held = {e.entry.scenario_digest or e.entry.id for e in entries}
+        self.held = {e.entry.scenario_digest for e in entries}
         self.add_marker("hri")
 
     def runtest(self) -> None:
         import shutil
 
         from hritest import search as qd
-        from hritest.replay import scenario_digest
 
         if not self.spec.is_file():
             pytest.skip(f"hritest: its spec {_shown(self.spec, self.config)} no longer exists")
@@ -343,27 +341,16 @@ class SearchItem(pytest.Item):
             seed=None,
             backend=qd.Backend(workers=os.cpu_count() or 1),
         )
-        spec_digest = found.run_dir.meta["spec_digest"]
-        new = []
-        for record in found.failures():
-            digest = scenario_digest(spec_digest, record["theta_repaired"], record["seed"])
-            if digest not in self.held and digest[:12] not in self.held:
-                new.append((digest[:12], record))
+        new = hc.new_failures(found, self.held)
         if new:
             self.user_properties += [
                 ("hri_entry", f"{self.spec_name}/search"),
                 ("hri_outcome", "search with new failures"),
             ]
-            names = [m.name for m in found.domain.measures]
-            lines = [
-                f"  {d}  objective {r['objective']:.6g}  "
-                + "  ".join(f"{n} {v:.4g}" for n, v in zip(names, r["measures"]))
-                for d, r in new
-            ]
             raise HriFailure(
                 f"a Random search of {self.budget} evaluations found {len(new)} failure(s) of {self.spec_name} "
                 f"that the corpus does not hold:\n"
-                + "\n".join(lines)
+                + "\n".join(new)
                 + f"\nkeep them: hritest promote {_shown(run, self.config)} "
                 f"--to {_shown(self.path.parent, self.config)}"
             )
@@ -400,23 +387,6 @@ def _worker(config: pytest.Config) -> Any:
 
         worker = config.stash[_worker_key] = ReplayWorker(cwd=config.rootpath, pythonpath=[p for p in sys.path if p])
     return worker
-
-
-def _domain(config: pytest.Config, spec: Path) -> Any:
-    """The compiled spec, once per spec per session (a spec that does not compile fails each of its tests)."""
-    cache = config.stash[_domains_key]
-    if spec not in cache:
-        from hritest.domain import compile_spec
-        from hritest.spec import load_spec
-
-        try:
-            cache[spec] = compile_spec(load_spec(spec))
-        except HritestError as exc:
-            cache[spec] = exc
-    found = cache[spec]
-    if isinstance(found, Exception):
-        raise found
-    return found
 
 
 @pytest.hookimpl(wrapper=True)
@@ -488,50 +458,3 @@ class _Summary:
 
 def _count(n: int, outcome: str) -> str:
     return f"{n} {outcome}s" if outcome in ("regression", "error") and n != 1 else f"{n} {outcome}"
-
-
-# --- the fixture for users' own tests ----------------------------------------------------------
-
-
-@pytest.fixture
-def hri_scenario(request: pytest.FixtureRequest) -> Callable[..., tuple[Any, Any]]:
-    """A factory that simulates one scenario: ``evaluation, rollout = hri_scenario(spec, theta, seed=0)``.
-
-    ``spec`` is a spec file (relative paths from the rootdir); ``theta`` the raw scenario parameters,
-    a sequence in the order ``hritest show`` lists or a mapping from those labels to values. Returns
-    the :class:`hritest.records.Evaluation` (``status``, ``objective``, ``measures``, ``metrics``,
-    ``failure``) and the Rollout (None when the scenario did not simulate). Specs compile once per
-    session::
-
-        def test_goals_stay_apart(hri_scenario):
-            evaluation, rollout = hri_scenario("specs/teleop.yaml", [0.6, 0.05, 0.6, 0.1, 0, 0, 0, 0, 0])
-            assert rollout.metrics["min_goal_distance"] > 0.05
-    """
-    config = request.config
-
-    def simulate(
-        spec: str | os.PathLike[str], theta: Sequence[float] | Mapping[str, float], seed: int = 0
-    ) -> tuple[Any, Any]:
-        import numpy as np
-
-        from hritest.evaluate import evaluate_with_rollout
-
-        domain = _domain(config, (config.rootpath / spec).resolve())
-        labels = list(domain.space.labels)
-        if isinstance(theta, Mapping):
-            missing = [label for label in labels if label not in theta]
-            extra = [key for key in theta if key not in labels]
-            if missing or extra:
-                raise ValueError(
-                    f"hri_scenario: theta for {spec} needs exactly {', '.join(labels)}; "
-                    f"missing {missing or 'none'}, unknown {extra or 'none'}"
-                )
-            theta = [theta[label] for label in labels]
-        values = np.asarray(theta, dtype=float)
-        if values.shape != (len(labels),):
-            raise ValueError(
-                f"hri_scenario: {spec} needs {len(labels)} theta values ({', '.join(labels)}), got {values.size}"
-            )
-        return evaluate_with_rollout(domain, values, seed=seed)
-
-    return simulate
