@@ -396,7 +396,8 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) ->
         if item.hri_section:
             report.sections.append(("hritest", item.hri_section))
         if item.hri_outcome == "now passing" and report.passed:
-            report.wasxfail = f"hritest open failure no longer fails ({item.entry.path.name})"
+            was = f"; it failed: {'; '.join(item.entry.why)}" if item.entry.why else ""
+            report.wasxfail = f"hritest open failure no longer fails ({item.entry.path.name}){was}"
     return report
 
 

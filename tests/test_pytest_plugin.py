@@ -204,7 +204,9 @@ def test_fixed_passing_regressed_still_failing_and_now_passing(project):
             "objective >= 8 (objective=9.425)*"
         ]
     )
-    result.stdout.fnmatch_lines([f"XPASS *{now_ok.name}::toy::{now_ok.stem}*no longer fails*"])
+    result.stdout.fnmatch_lines(
+        [f"XPASS *{now_ok.name}::toy::{now_ok.stem}*no longer fails*; it failed: objective >= 8 (objective=10)"]
+    )
     # The now-passing entry's report section says how to mark it fixed; nothing was changed.
     result.stdout.fnmatch_lines(["*hritest*", f"open failure {entry_id(now_ok)} no longer fails*"])
     assert load_entry(now_ok).status == "open" and load_entry(fixed_ok).status == "fixed"
@@ -395,6 +397,9 @@ def test_a_stored_failure_that_now_crashes_fails_with_the_plugins_message(projec
         ("status: open", "status: maybe", "status"),
         ("seed: 0\n", "", "seed"),
         ("  g0x: 0.6\n", "  g0x: [0.6]\n", "theta.g0x"),
+        ("outcome_parts:", "outcome_partz:", "outcome_parts"),  # format 2 needs its outcome digest
+        ("why:\n- ", "why: ", "why"),
+        ("scenario_digest: ", "scenario_digest: 0", "scenario_digest"),
     ],
 )
 def test_a_malformed_entry_is_a_collection_error_naming_file_and_field(project, old, new, field):
