@@ -49,6 +49,9 @@ def seed_timeout(entry: Entry) -> float:
 class ReplayWorker:
     """One worker process, started on first use and restarted after a timeout or a death.
 
+    ``compiled`` holds each spec's compile answer (its labels and outcome digest, or its error) for
+    the whole session; a restarted worker compiles a spec again before replaying one of its entries.
+
     ``pythonpath`` is prepended to the worker's ``PYTHONPATH`` (the test process's ``sys.path``, so
     that ``module:Class`` plugins import there as they do here); ``cwd`` is where it runs.
     """
@@ -58,6 +61,7 @@ class ReplayWorker:
         self.process: subprocess.Popen | None = None
         self.log: Any = None
         self.compiled: dict[str, dict[str, Any]] = {}
+        self.loaded: set[str] = set()  # the specs the current worker process has compiled
 
     def request(self, message: dict[str, Any], *, timeout: float) -> dict[str, Any]:
         """Sends ``message`` and returns the answer.
@@ -102,7 +106,7 @@ class ReplayWorker:
             cwd=self.cwd,
             env=env,
         )
-        self.compiled = {}
+        self.loaded = set()
 
     def _read_line(self, timeout: float) -> bytes | None:
         """A line from the worker, ``b""`` at end of file, None after ``timeout`` seconds."""
@@ -157,13 +161,17 @@ def replay_entry(
             f"{entry.path}: field 'spec' names {spec}, outside the project {project}; replaying it would run "
             "the plugins it names. Move the spec into the project, or pass --hri-allow-outside to trust it"
         )
-    try:
-        key = str(spec)
-        if key not in worker.compiled:
+    key = str(spec)
+    if key not in worker.compiled or ("error" not in worker.compiled[key] and key not in worker.loaded):
+        try:
             worker.compiled[key] = worker.request({"compile": key}, timeout=COMPILE_SECONDS)
-        compiled = worker.compiled[key]
-        if "error" in compiled:
-            return verdict.error(compiled["error"])
+            worker.loaded.add(key)
+        except WorkerError as exc:  # kept, so that the spec's other entries do not wait as long again
+            worker.compiled[key] = {"error": f"compiling its spec: {exc}"}
+    compiled = worker.compiled[key]
+    if "error" in compiled:
+        return verdict.error(compiled["error"])
+    try:
         if list(entry.theta) != compiled["labels"]:
             return verdict.error(
                 f"{entry.path}: field 'theta' has components {', '.join(entry.theta)}, but {entry.spec_name}'s "
