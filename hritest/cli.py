@@ -1,9 +1,15 @@
-"""The ``hritest`` command line. Exit codes: 0 ok, 1 a finding or failure, 2 usage or input error."""
+"""The ``hritest`` command line; its exit codes are :class:`ExitCode`, the same for every command."""
 
 from __future__ import annotations
 
 import functools
 import os
+import signal
+import tempfile
+import threading
+import time
+import traceback
+from enum import IntEnum
 from pathlib import Path
 from typing import Annotated
 
@@ -14,6 +20,7 @@ from rich.table import Table
 
 import hritest
 from hritest.errors import HritestError
+from hritest.interrupt import Interrupted, stop_on_signals
 
 app = typer.Typer(
     no_args_is_help=True,
@@ -24,23 +31,79 @@ app = typer.Typer(
 out = Console(soft_wrap=True)
 err = Console(stderr=True, soft_wrap=True)
 
-EXIT_OK, EXIT_FINDING, EXIT_INPUT = 0, 1, 2
+
+class ExitCode(IntEnum):
+    """What hritest's exit status means, for every command (README, "Exit codes")."""
+
+    OK = 0
+    FINDING = 1  # failures found, a replay that does not reproduce, a scenario that cannot be repaired
+    INPUT = 2  # bad input: a spec, plugin, argument, run directory or corpus file; the message says what
+    INCOMPLETE = 3  # an evaluation could not complete (plugin error, NaN, timeout, crash); a search: none did
+    BUG = 4  # hritest itself failed; the traceback is in a file the message names
+    INTERRUPTED = 128 + signal.SIGINT  # Ctrl-C; a search checkpointed and says how to resume
+    TERMINATED = 128 + signal.SIGTERM  # SIGTERM; the same
+
 
 SpecArg = Annotated[Path, typer.Argument(help="a hritest spec (YAML)", show_default=False)]
 
 
 def command(fn):  # noqa: ANN001, ANN201 - a typer command
-    """Registers ``fn`` as a command; hritest's own errors become one message and exit code 2."""
+    """Registers ``fn`` as a command, whose exit status says what happened (:class:`ExitCode`).
+
+    hritest's own errors (bad input) become their message and exit 2; SIGINT and SIGTERM stop it
+    with 130 and 143 (a search first saying how to resume); any other exception is a bug in
+    hritest: one line, and its traceback in a file, exit 4. No traceback reaches the terminal.
+    """
 
     @functools.wraps(fn)
-    def run(*args, **kwargs):  # noqa: ANN202
+    def run(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
         try:
-            return fn(*args, **kwargs)
+            with stop_on_signals():
+                return fn(*args, **kwargs)
         except HritestError as exc:
             err.print(str(exc), markup=False, highlight=False)
-            raise typer.Exit(EXIT_INPUT) from None
+            raise typer.Exit(ExitCode.INPUT) from None
+        except (Interrupted, KeyboardInterrupt) as exc:
+            raise typer.Exit(_interrupted(exc)) from None
+        except (typer.Exit, typer.Abort, typer.TyperException):
+            raise
+        except Exception as exc:
+            _bug(exc)
+            raise typer.Exit(ExitCode.BUG) from None
 
     return app.command()(run)
+
+
+def _interrupted(exc: BaseException) -> ExitCode:
+    signum = exc.signum if isinstance(exc, Interrupted) else signal.SIGINT
+    run = exc.run if isinstance(exc, Interrupted) else None
+    name = "Ctrl-C" if signum == signal.SIGINT else signal.Signals(signum).name
+    if run is None:
+        err.print(f"stopped by {name}", highlight=False)
+    else:
+        err.print(
+            f"stopped by {name}; the run is checkpointed in {run}. Continue it with:\n  hritest search --resume {run}",
+            markup=False,
+            highlight=False,
+        )
+    return ExitCode.INTERRUPTED if signum == signal.SIGINT else ExitCode.TERMINATED
+
+
+def _bug(exc: Exception) -> None:
+    """Says that hritest failed, and where its traceback is: the run directory's error.log
+    when a search wrote one, else a new file in the temporary folder."""
+    path = getattr(exc, "traceback_file", None)
+    if path is None:
+        with tempfile.NamedTemporaryFile("w", prefix="hritest-error-", suffix=".log", delete=False) as log:
+            log.write("".join(traceback.format_exception(exc)))
+        path = log.name
+    last = traceback.format_exception_only(exc)[-1].strip()
+    err.print(
+        f"hritest failed ({last}). This is a bug in hritest, not in your spec or plugins; the traceback is "
+        f"in {path}. Please report it with that file (hritest {hritest.__version__}).",
+        markup=False,
+        highlight=False,
+    )
 
 
 def _version(value: bool) -> None:
@@ -74,7 +137,7 @@ def validate(specs: Annotated[list[Path], typer.Argument(help="one or more spec 
         else:
             out.print(f"[green]ok[/green] {path}", highlight=False)
     if bad:
-        raise typer.Exit(EXIT_INPUT)
+        raise typer.Exit(ExitCode.INPUT)
 
 
 @command
@@ -96,7 +159,7 @@ def check(
     except SpecError as exc:
         err.print(f"[red]x[/red] {spec} does not compile:", highlight=False)
         err.print(str(exc), markup=False, highlight=False)
-        raise typer.Exit(EXIT_INPUT) from None
+        raise typer.Exit(ExitCode.INPUT) from None
     for line in report.passed:
         out.print(f"[green]ok[/green] {escape(line)}", highlight=False)
     for note in report.notes:
@@ -111,7 +174,7 @@ def check(
         err.print(f"[red]x[/red] {escape(str(finding))}", highlight=False)
     if not report.ok:
         err.print(f"{len(report.findings)} finding(s): fix them before a search.", highlight=False)
-        raise typer.Exit(EXIT_INPUT)
+        raise typer.Exit(ExitCode.INPUT)
     out.print(f"{spec}: ready to search.", highlight=False)
 
 
@@ -148,13 +211,16 @@ def show(spec: SpecArg) -> None:
             table.add_row(str(slot.start + i), label, slot.bind, f"{slot.lower:g}", f"{slot.upper:g}")
     out.print(table)
 
-    archive = Table(
-        title="result archive: " + " x ".join(map(str, domain.archive_dims)) + " cells", title_justify="left"
+    cells = (
+        f"a cvt archive of {domain.archive_cells:,} cells"
+        if s.archive.type == "cvt"
+        else " x ".join(map(str, domain.archive_dims)) + " cells"
     )
+    archive = Table(title=f"result archive: {cells}", title_justify="left")
     for column in ("measure", "expression", "range", "cells"):
         archive.add_column(column)
     for m in domain.measures:
-        archive.add_row(m.name, m.expression.text, f"[{m.range[0]:g}, {m.range[1]:g}]", str(m.cells))
+        archive.add_row(m.name, m.expression.text, f"[{m.range[0]:g}, {m.range[1]:g}]", str(m.cells or "—"))
     out.print(archive)
     out.print(
         f"objective {s.objective.expr} in [{s.objective.range[0]:g}, {s.objective.range[1]:g}] "
@@ -225,7 +291,7 @@ def repair(spec: SpecArg, theta: ThetaOption, json: JsonOption = False) -> None:
         if outcome.message:
             out.print(outcome.message, highlight=False)
     if not outcome.ok:
-        raise typer.Exit(EXIT_FINDING)
+        raise typer.Exit(ExitCode.FINDING)
 
 
 @command
@@ -235,7 +301,10 @@ def simulate(
     seed: Annotated[int, typer.Option(help="the evaluation seed")] = 0,
     json: JsonOption = False,
 ) -> None:
-    """Simulate one scenario: status, objective, measures and every metric. Exit 1 if it is a failure."""
+    """Simulate one scenario: status, objective, measures and every metric.
+
+    Exit 1 if it is a failure, 3 if it could not be evaluated (its status says why).
+    """
     from hritest.evaluate import evaluate
     from hritest.records import clauses_text
 
@@ -278,9 +347,9 @@ def simulate(
         if evaluation.message:
             err.print(evaluation.message, markup=False, highlight=False)
     if not evaluation.ok:
-        raise typer.Exit(EXIT_INPUT)
+        raise typer.Exit(ExitCode.INCOMPLETE)
     if evaluation.failure:
-        raise typer.Exit(EXIT_FINDING)
+        raise typer.Exit(ExitCode.FINDING)
 
 
 @command
@@ -322,7 +391,7 @@ def search(
     device: Annotated[
         str, typer.Option(help="where the surrogate runs: auto, cpu or cuda", rich_help_panel="Surrogate")
     ] = "auto",
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress bar (for CI)")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress output")] = False,
     trust: Annotated[
         bool,
         typer.Option(
@@ -332,7 +401,11 @@ def search(
         ),
     ] = False,
 ) -> None:
-    """Search for diverse failures; writes a run directory. Exit 1 if failures were found."""
+    """Search for diverse failures; writes a run directory.
+
+    Exit 1 if failures were found, 3 if no evaluation completed. Ctrl-C or SIGTERM stops it with
+    130 or 143, checkpointed: --resume continues.
+    """
     from hritest import search as qd
 
     if (spec is None) == (resume is None):
@@ -359,7 +432,7 @@ def search(
     if device not in ("auto", "cpu", "cuda"):
         raise typer.BadParameter(f"must be auto, cpu or cuda, not {device!r}", param_hint="--device")
     backend = qd.Backend(workers=workers, cluster=cluster, timeout=timeout)
-    with _progress(quiet) as progress:
+    with _Progress(quiet) as progress:
         if resume is not None:
             found = qd.resume(run_path=resume, backend=backend, progress=progress, trust=trust)
         else:
@@ -376,55 +449,110 @@ def search(
     _print_summary(found)
     from hritest.report import write_report
 
+    if not quiet:
+        err.print("writing the report (re-simulating the failures it records)...", highlight=False)
     report = write_report(found.run_dir.path)
     out.print(f"report: {report}", highlight=False)
+    if not any(r.ok for r in found.records.values()):
+        err.print(
+            f"no evaluation completed: see the status and message of each in {found.run_dir.path / 'evaluations.jsonl'}"
+            " (try one with 'hritest simulate')",
+            markup=False,
+            highlight=False,
+        )
+        raise typer.Exit(ExitCode.INCOMPLETE)
     if found.failures():
-        raise typer.Exit(EXIT_FINDING)
+        raise typer.Exit(ExitCode.FINDING)
 
 
-class _progress:
-    """A rich progress bar fed by search snapshots (nothing at all with ``quiet``)."""
+class _Progress:
+    """Search progress on stderr: a bar that fits the terminal on one; without one (a CI log), a
+    plain line when the search starts, every ``PLAIN_SECONDS`` while it runs (whatever it is
+    doing, a long surrogate training included) and when it ends; nothing with ``quiet``."""
+
+    PLAIN_SECONDS = 5.0
 
     def __init__(self, quiet: bool) -> None:
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+        from rich.table import Column
 
+        self.plain = not quiet and not err.is_terminal
         self.bar = (
             None
-            if quiet
+            if quiet or self.plain
             else Progress(
-                TextColumn("[bold]search"),
-                BarColumn(),
-                MofNCompleteColumn(),
-                TextColumn("{task.fields[stats]}"),
-                TimeRemainingColumn(),
+                # One line at any width: the bar and the numbers share what the counts leave.
+                TextColumn("[bold]search", table_column=Column(no_wrap=True)),
+                BarColumn(bar_width=None, table_column=Column(ratio=1, min_width=5)),
+                MofNCompleteColumn(table_column=Column(no_wrap=True)),
+                TextColumn("{task.fields[stats]}", table_column=Column(ratio=3, no_wrap=True, overflow="ellipsis")),
+                TimeRemainingColumn(table_column=Column(no_wrap=True)),
                 console=err,
                 transient=True,
+                expand=True,
             )
         )
         self.task = None
-        self.stats = "starting"
+        self.snapshot = None
+        self.first: tuple[float, int] | None = None  # (time, evaluations) of the first snapshot
+        self.stop = threading.Event()
+        self.ticker = threading.Thread(target=self._tick, daemon=True)
 
     def __enter__(self):  # noqa: ANN204
         if self.bar:
             self.bar.start()
+        if self.plain:
+            self.ticker.start()
         return self
 
     def __exit__(self, *exc: object) -> None:
         if self.bar:
             self.bar.stop()
+        if self.plain:
+            self.stop.set()
+            self.ticker.join()
+            if self.snapshot is not None:
+                self._print_line()
 
     def __call__(self, snapshot) -> None:  # noqa: ANN001 - hritest.search.Snapshot
+        if self.first is None:
+            self.first = (time.monotonic(), snapshot.evaluations)
+            if self.plain:
+                self.snapshot = snapshot
+                self._print_line()
+        self.snapshot = snapshot
         if self.bar is None:
             return
         if self.task is None:
-            self.task = self.bar.add_task("search", total=snapshot.budget, stats=self.stats)
-        if snapshot.summary is not None:
-            s = snapshot.summary
-            self.stats = (
-                f"QD-score {s.qd_score:,.1f}  coverage {s.coverage:.1%}  best {s.best:.3g}  "
-                f"failures {snapshot.failures}"
-            )
-        self.bar.update(self.task, completed=snapshot.evaluations, stats=self.stats)
+            self.task = self.bar.add_task("search", total=snapshot.budget, stats="")
+        self.bar.update(self.task, completed=snapshot.evaluations, stats=self._stats(snapshot))
+
+    def _tick(self) -> None:
+        while not self.stop.wait(self.PLAIN_SECONDS):
+            if self.snapshot is not None:
+                self._print_line()
+
+    def _print_line(self) -> None:
+        snapshot = self.snapshot
+        started, evaluations = self.first
+        rate = (snapshot.evaluations - evaluations) / max(time.monotonic() - started, 1e-9)
+        err.print(
+            f"search: {snapshot.evaluations}/{snapshot.budget} evaluations, {self._stats(snapshot)}, "
+            f"{rate:.3g} evaluations/s",
+            markup=False,
+            highlight=False,
+        )
+
+    @staticmethod
+    def _stats(snapshot) -> str:  # noqa: ANN001 - hritest.search.Snapshot
+        s = snapshot.summary
+        parts = [
+            f"QD-score {s.qd_score:,.1f}, coverage {s.coverage:.1%}" if s else "QD-score -",
+            f"failures {snapshot.failures}",
+            f"did not complete {snapshot.failed}",
+            snapshot.phase,
+        ]
+        return ", ".join(parts)
 
 
 def _print_summary(found) -> None:  # noqa: ANN001 - hritest.search.Search
@@ -509,7 +637,8 @@ def replay(
 ) -> None:
     """Re-simulate a failure (or any scenario), check it reproduces, and write its Rerun recording.
 
-    Exit 0 when the outcome matches the stored one (for a SPEC: a second simulation), 1 when not.
+    Exit 0 when the outcome matches the stored one (for a SPEC: a second simulation), 1 when not,
+    3 when the scenario could not be evaluated.
     """
     from hritest import recording
     from hritest import replay as rp
@@ -547,8 +676,10 @@ def replay(
     out.print(f"recording: {path}", highlight=False)
     if open_:
         recording.open_viewer(path)
+    if not result.evaluation.ok:
+        raise typer.Exit(ExitCode.INCOMPLETE)
     if not result.matches:
-        raise typer.Exit(EXIT_FINDING)
+        raise typer.Exit(ExitCode.FINDING)
 
 
 @command

@@ -81,6 +81,16 @@ def start(
         raise HritestError(f"unknown algorithm {algorithm!r}; choose one of {', '.join(ALGORITHMS)}")
     budget = budget if budget is not None else settings.budget
     seed = seed if seed is not None else settings.seed
+    initial = settings.surrogate.initial_evaluations
+    if algorithm in SURROGATE and budget <= initial:
+        # It would spend the whole budget on the uniform initial sample: a Random search recorded
+        # as SAS/DSAS, which a comparison of algorithms would take at its word.
+        raise HritestError(
+            f"{algorithm} with a budget of {budget} evaluations never uses its surrogate: the first "
+            f"{initial} (search.surrogate.initial_evaluations) are uniform random samples. Give a budget "
+            f"above {initial} (--budget or search.budget), lower search.surrogate.initial_evaluations, "
+            "or use --algorithm random"
+        )
     ref = DomainRef(spec=str(Path(spec_file).resolve()), base=str(Path(spec_file).resolve().parent))
     meta = {"algorithm": algorithm, "budget": budget, "seed": seed, "spec_base": ref.base}
     if algorithm in SURROGATE:  # what decides an SAS / DSAS run's cost and quality besides the budget

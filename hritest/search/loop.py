@@ -10,14 +10,19 @@ from its last checkpoint and re-evaluates nothing it finished.
 from __future__ import annotations
 
 import math
+import signal
 import time
+import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
 import yaml
 
+from hritest import interrupt
 from hritest.domain import Domain
+from hritest.errors import HritestError
+from hritest.interrupt import Interrupted
 from hritest.records import Evaluation, EvaluationRecord, rank_failures
 from hritest.rundir import RunDirectory, RunDirectoryError
 from hritest.search import algorithms, archives
@@ -30,16 +35,25 @@ SURROGATE = ("sas", "dsas")
 # between batches the workers wait, so the loop does only what resuming needs (the checkpoint).
 SUMMARY_SECONDS = 5.0
 ALGORITHMS = (*algorithms.MODEL_FREE, *SURROGATE)
+ERROR_LOG = "error.log"  # the traceback of a bug in hritest that stopped the search
 
 
 @dataclass(frozen=True)
 class Snapshot:
-    """Where a search stands, for progress displays."""
+    """Where a search stands, for progress displays.
+
+    ``summary`` and ``failures`` (elites that meet the failure condition) are as of the last
+    batch; ``failed`` counts the evaluations that did not complete; ``phase`` says what the
+    search is doing (proposing a batch, which for SAS/DSAS is training the surrogate and searching
+    it, or evaluating one).
+    """
 
     evaluations: int
     budget: int
     summary: archives.Summary | None
     failures: int
+    failed: int = 0
+    phase: str = "evaluating"
 
 
 class Search:
@@ -55,6 +69,8 @@ class Search:
         self.records: dict[int, EvaluationRecord] = {r.index: r for r in records}
         self.occupancy_shape = occupancy_shape(domain)
         self.summarised = -math.inf
+        self.failed = sum(not r.ok for r in records)  # evaluations that did not complete
+        self.last = Snapshot(state.evaluations, state.budget, None, 0, self.failed)
 
     @classmethod
     def new(
@@ -115,20 +131,40 @@ class Search:
         return self.state.evaluations >= self.state.budget
 
     def run(self, evaluator: Evaluator, progress: Callable[[Snapshot], None] = lambda s: None) -> None:
-        """Runs batches until the budget is spent."""
-        while not self.done:
-            self.step(evaluator, progress)
+        """Runs batches until the budget is spent.
+
+        Raises:
+            Interrupted: on SIGINT or SIGTERM (see :mod:`hritest.interrupt`), naming the run
+                directory, whose files are whole: ``--resume`` continues the run.
+            Exception: a bug in hritest, its traceback written to ``error.log`` in the run
+                directory, whose path the exception holds as ``traceback_file``.
+        """
+        try:
+            while not self.done:
+                self.step(evaluator, progress)
+        except (Interrupted, KeyboardInterrupt) as exc:
+            signum = exc.signum if isinstance(exc, Interrupted) else signal.SIGINT
+            raise Interrupted(signum, run=self.run_dir.path) from None
+        except HritestError:
+            raise
+        except Exception as exc:
+            log = self.run_dir.path / ERROR_LOG
+            self.run_dir.write_text(ERROR_LOG, "".join(traceback.format_exception(exc)))
+            exc.traceback_file = log  # for the command line's one-line message
+            raise
 
     def step(self, evaluator: Evaluator, progress: Callable[[Snapshot], None]) -> None:
         """One batch: ask (unless a resumed batch is pending), evaluate what is missing, tell."""
         started = time.monotonic()
         state = self.state
         if state.pending is None:
+            progress(replace(self.snapshot(), phase="proposing"))
             solutions = state.proposer.ask(self)
             count = min(len(solutions), state.budget - state.evaluations)
             pending = PendingBatch(batch=state.batch + 1, solutions=solutions, first=state.evaluations, count=count)
             self.state = state = replace(state, batch=pending.batch, pending=pending)
-            self.run_dir.save_checkpoint(state)
+            with interrupt.deferred():
+                self.run_dir.save_checkpoint(state)
         pending = state.pending
         first, count, batch = pending.first, pending.count, pending.batch
         jobs = [
@@ -141,8 +177,10 @@ class Search:
 
         def finished(job: Job, evaluation: Evaluation) -> None:
             record = EvaluationRecord.of(evaluation, index=job.index, batch=batch)
-            self.run_dir.append(record, evaluation.occupancy, self.occupancy_shape)
-            self.records[job.index] = record
+            with interrupt.deferred():
+                self.run_dir.append(record, evaluation.occupancy, self.occupancy_shape)
+                self.records[job.index] = record
+            self.failed += not record.ok
             done[0] += 1
             progress(self.snapshot(extra=done[0]))
 
@@ -163,14 +201,16 @@ class Search:
             best=summary.best,
             failures=len(failures),
         )
-        self.state = state = replace(
-            state, evaluations=row.evaluations, pending=None, elapsed=elapsed, progress=(*state.progress, row)
-        )
-        self.run_dir.save_checkpoint(state)
+        with interrupt.deferred():
+            self.state = state = replace(
+                state, evaluations=row.evaluations, pending=None, elapsed=elapsed, progress=(*state.progress, row)
+            )
+            self.run_dir.save_checkpoint(state)
         if self.done or time.monotonic() - self.summarised >= SUMMARY_SECONDS:
             self.write_summaries(failures)
             self.summarised = time.monotonic()
-        progress(Snapshot(state.evaluations, state.budget, summary, len(failures)))
+        self.last = Snapshot(state.evaluations, state.budget, summary, len(failures), self.failed)
+        progress(self.last)
 
     def _add_to_result(self, records: list[EvaluationRecord]) -> None:
         """Adds the successful evaluations to the result archive with their raw objective."""
@@ -204,7 +244,8 @@ class Search:
         return theta, grids[[i for i, _ in rows]], targets
 
     def snapshot(self, extra: int = 0) -> Snapshot:
-        return Snapshot(self.state.evaluations + extra, self.state.budget, None, 0)
+        """The last batch's snapshot, with ``extra`` evaluations of the current one finished."""
+        return replace(self.last, evaluations=self.state.evaluations + extra, failed=self.failed, phase="evaluating")
 
     def failures(self) -> list[EvaluationRecord]:
         """The result archive's elites that meet the failure condition, worst first."""

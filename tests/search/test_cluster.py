@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+import threading
+import time
+
 import pytest
 
 from hritest import search as qd
@@ -50,3 +55,53 @@ def test_a_plugin_crash_on_a_cluster_fails_its_scenario_only(toy_spec, tmp_path,
     statuses = {r["status"] for r in found.records.values() if r["theta"][4] > 0.045}
     assert statuses == {"plugin_error"}
     assert {r["status"] for r in found.records.values() if r["theta"][4] <= 0.045} == {"ok"}
+
+
+@pytest.fixture
+def separate_cluster(tmp_path):
+    """A scheduler and two single-threaded workers, each its own process as on real machines
+    (no nanny, so a killed worker stays dead); yields the scheduler file and the workers."""
+    file = tmp_path / "scheduler.json"
+    dask = [sys.executable, "-m", "dask"]
+    quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    processes = [
+        subprocess.Popen([*dask, "scheduler", "--port", "0", "--no-dashboard", "--scheduler-file", file], **quiet)
+    ]
+    try:
+        worker = [*dask, "worker", "--scheduler-file", file, "--nthreads", "1", "--no-nanny", "--no-dashboard"]
+        processes += [subprocess.Popen(worker, **quiet) for _ in range(2)]
+        with distributed.Client(scheduler_file=str(file), timeout=30) as client:
+            client.wait_for_workers(2, timeout=30)
+            address = client.scheduler.address
+        yield address, processes[1:]
+    finally:
+        for process in processes:
+            process.kill()
+            process.wait()
+
+
+def test_a_worker_killed_mid_run_loses_no_evaluation(toy_spec, tmp_path, separate_cluster):
+    address, workers = separate_cluster
+    spec = toy_spec("time_limit: 10.0\n", "time_limit: 10.0\n  params: {delay: 0.05}\n")
+    lines = tmp_path / "run" / "evaluations.jsonl"
+    killed = threading.Event()
+
+    def kill_a_worker_mid_run() -> None:
+        while not (lines.exists() and len(lines.read_text().splitlines()) >= 30):
+            time.sleep(0.02)
+        workers[0].kill()
+        killed.set()
+
+    threading.Thread(target=kill_a_worker_mid_run, daemon=True).start()
+    found = qd.start(
+        spec_file=spec,
+        out=tmp_path / "run",
+        algorithm="random",
+        budget=150,
+        seed=2,
+        backend=qd.Backend(cluster=address, timeout=20),
+    )
+    assert killed.is_set() and workers[0].wait() is not None
+    assert sorted(found.records) == list(range(150))
+    assert {r["status"] for r in found.records.values()} == {"ok"}
+    assert len(lines.read_text().splitlines()) == 150  # each evaluation once

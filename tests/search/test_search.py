@@ -12,6 +12,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import psutil
 import pytest
 import yaml
 from typer.testing import CliRunner
@@ -69,7 +70,15 @@ def test_same_spec_and_seed_give_the_same_result_archive(toy_spec, tmp_path):
 
 
 @pytest.mark.parametrize(
-    ("fault", "status"), [("raise", "plugin_error"), ("nan", "nan"), ("exit", "crashed"), ("hang", "timeout")]
+    ("fault", "status"),
+    [
+        ("raise", "plugin_error"),
+        ("nan", "nan"),
+        ("exit", "crashed"),  # os._exit: the worker dies
+        ("hang", "timeout"),
+        ("sys_exit", "plugin_error"),  # SystemExit is the scenario's, not the search's
+        ("interrupt", "plugin_error"),  # so is a KeyboardInterrupt the plugin raises
+    ],
 )
 def test_a_misbehaving_plugin_fails_its_scenarios_only(toy_spec, tmp_path, fault, status):
     spec = toy_spec("time_limit: 10.0\n", f"time_limit: 10.0\n  params: {{fault: {fault}, fault_above: 0.045}}\n")
@@ -95,7 +104,9 @@ def test_a_misbehaving_plugin_fails_its_scenarios_only(toy_spec, tmp_path, fault
     assert elites_.isdisjoint(r["index"] for r in bad)
 
 
-def start_in_background(spec: Path, out: Path, *, until_lines: int) -> subprocess.Popen:
+def start_in_background(
+    spec: Path, out: Path, *, until_lines: int, stderr: int = subprocess.DEVNULL
+) -> subprocess.Popen:
     """A 700-evaluation search in its own process, returned once ``until_lines`` evaluations are in."""
     command = [
         sys.executable,
@@ -113,7 +124,7 @@ def start_in_background(spec: Path, out: Path, *, until_lines: int) -> subproces
         "--out",
         str(out),
     ]
-    process = subprocess.Popen(command, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    process = subprocess.Popen(command, start_new_session=True, stdout=subprocess.DEVNULL, stderr=stderr)
     lines = out / "evaluations.jsonl"
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline:
@@ -152,6 +163,47 @@ def test_a_killed_run_resumes_to_the_same_state(toy_spec, tmp_path):
     redone = [r for r in after if r["index"] in done_before and r != done_before[r["index"]]]
     assert not redone  # nothing finished before the kill was evaluated again
     assert elites(killed) == elites(tmp_path / "whole")
+
+
+@pytest.mark.parametrize(
+    ("signum", "code"),
+    [
+        (signal.SIGINT, 130),  # Ctrl-C: a terminal sends it to the whole process group
+        (signal.SIGTERM, 143),  # kill, a CI runner's cancel: to the search only
+        (signal.SIGKILL, -signal.SIGKILL),  # nothing runs in the search, but its workers still die
+    ],
+    ids=["SIGINT", "SIGTERM", "SIGKILL"],
+)
+def test_a_stopped_search_leaves_no_process_behind_and_resumes(toy_spec, tmp_path, signum, code):
+    spec = toy_spec("time_limit: 10.0\n", "time_limit: 10.0\n  params: {delay: 0.05}\n")
+    run = tmp_path / "run"
+    process = start_in_background(spec, run, until_lines=20, stderr=subprocess.PIPE)
+    workers = psutil.Process(process.pid).children(recursive=True)
+    assert len(workers) >= 2  # the pool's (and the pool's resource tracker)
+    if signum == signal.SIGINT:
+        os.killpg(process.pid, signum)
+    else:
+        process.send_signal(signum)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == code, stderr.decode()
+    if signum != signal.SIGKILL:
+        assert f"hritest search --resume {run}" in stderr.decode()
+        assert "Traceback" not in stderr.decode()
+    assert not [w.pid for w in workers if alive(w)]
+    resume_to_the_end(run)
+
+
+def alive(process: psutil.Process, *, within: float = 10.0) -> bool:
+    """Whether ``process`` still runs after up to ``within`` seconds (a killed one takes a moment)."""
+    deadline = time.monotonic() + within
+    while time.monotonic() < deadline:
+        try:
+            if process.status() == psutil.STATUS_ZOMBIE:
+                return False
+        except psutil.NoSuchProcess:
+            return False
+        time.sleep(0.05)
+    return True
 
 
 def test_a_run_packed_while_it_runs_resumes_elsewhere_to_the_same_state(toy_spec, tmp_path):
