@@ -109,29 +109,39 @@ def signing_key() -> bytes:
         RunDirectoryError: a key that others can read or write, or that is not this user's.
     """
     path = key_path()
-    if not path.exists():
-        path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".signing.key.")  # 0600
-        try:
-            with os.fdopen(fd, "wb") as handle:
-                handle.write(secrets.token_bytes(32))
-                handle.flush()
-                os.fsync(handle.fileno())
-            os.link(tmp, path)  # never over a key another process made meanwhile
-        except FileExistsError:
-            pass
-        finally:
-            Path(tmp).unlink(missing_ok=True)
-    status = path.stat()
+    try:
+        if not path.exists():
+            _make_key(path)
+        status = path.stat()
+        key = path.read_bytes()
+    except OSError as exc:
+        raise RunDirectoryError(
+            f"the signing key {path} cannot be made or read ({exc.strerror}); hritest signs run directories "
+            "with it. Set XDG_CONFIG_HOME to a folder of yours that can be written"
+        ) from None
     if status.st_uid != os.getuid() or status.st_mode & 0o077:
         raise RunDirectoryError(
             f"{path} is readable or writable by others (or not yours): anyone who can read it can make run "
             f"directories that hritest loads as yours. Run 'chmod 600 {path}' if it is yours, else delete it"
         )
-    key = path.read_bytes()
     if len(key) < 32:
         raise RunDirectoryError(f"{path} is not a signing key (too short); delete it and a new one is made")
     return key
+
+
+def _make_key(path: Path) -> None:
+    path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".signing.key.")  # 0600
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(secrets.token_bytes(32))
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.link(tmp, path)  # never over a key another process made meanwhile
+    except FileExistsError:
+        pass
+    finally:
+        Path(tmp).unlink(missing_ok=True)
 
 
 def sign(data: bytes) -> bytes:
@@ -181,17 +191,18 @@ class RunDirectory:
         path = Path(folder) if folder else Path(root) / f"{name}-{stamp}"
         if path.exists() and any(path.iterdir()):
             raise RunDirectoryError(f"{path} already exists and is not empty; choose another --out or remove it")
-        path.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(spec_file, path / "spec.yaml")
+        spec = Path(spec_file).read_bytes()  # read once: the copy is exactly what the digest covers
         meta = {
             "format": FORMAT,
             "spec_file": str(Path(spec_file).resolve()),
-            "spec_digest": digest(spec_file),
+            "spec_digest": hashlib.sha256(spec).hexdigest(),
             "created": datetime.now(UTC).isoformat(timespec="seconds"),
             "versions": versions(),
             **meta,
         }
-        meta["signature"] = _meta_signature(meta)
+        meta["signature"] = _meta_signature(meta)  # before the folder: a key that fails leaves nothing
+        path.mkdir(parents=True, exist_ok=True)
+        atomic_write(path / "spec.yaml", spec)
         atomic_write(path / RUN_FILE, json.dumps(meta, indent=2))
         (path / LOCK_FILE).touch()
         return cls(path, meta)

@@ -76,6 +76,13 @@ def test_the_signing_key_is_made_once_and_kept_private(tmp_path, monkeypatch):
     path.chmod(0o640)
     with pytest.raises(RunDirectoryError, match="chmod 600"):
         signing_key()
+    (tmp_path / "file").write_text("")
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "file"))  # no folder can be made there
+    with pytest.raises(RunDirectoryError, match="cannot be made or read"):
+        signing_key()
+    with pytest.raises(RunDirectoryError, match="cannot be made or read"):
+        new_run(tmp_path)
+    assert not (tmp_path / "run").exists()  # nothing half-made to block the next try
 
 
 def test_a_checkpoint_loads_only_as_its_writer_signed_it(tmp_path, monkeypatch):
