@@ -616,7 +616,10 @@ def report(
 @command
 def replay(
     target: Annotated[
-        Path, typer.Argument(help="a run directory (with --failure) or a spec (with --theta)", show_default=False)
+        Path,
+        typer.Argument(
+            help="a run directory (with --failure), a corpus entry file, or a spec (with --theta)", show_default=False
+        ),
     ],
     failure: Annotated[
         int | None,
@@ -640,6 +643,7 @@ def replay(
     Exit 0 when the outcome matches the stored one (for a SPEC: a second simulation), 1 when not,
     3 when the scenario could not be evaluated.
     """
+    from hritest import corpus as hc
     from hritest import recording
     from hritest import replay as rp
     from hritest.errors import HritestError as Bad
@@ -655,6 +659,14 @@ def replay(
         path = recording.check_writable(out_path or run.path / "recordings" / f"{failure}.rrd")
         result = rp.replay_record(rp.run_domain(run), record, spec_digest=run.meta["spec_digest"], tolerance=tolerance)
         title = f"{result.domain.spec.name}: failure {failure} ({run.path.resolve().name})"
+    elif hc.is_entry(target):
+        if failure is not None or theta is not None:
+            raise typer.BadParameter(
+                "a corpus entry replays its own theta and seed: give neither", param_hint="--theta"
+            )
+        path = recording.check_writable(out_path or Path("recordings") / f"{target.stem}.rrd")
+        result = rp.replay_entry(target, tolerance=tolerance)
+        title = f"{result.domain.spec.name}: corpus entry {target.stem}"
     else:
         if theta is None or failure is not None:
             raise typer.BadParameter("with a spec give --theta v1,v2,... (and no --failure)", param_hint="--theta")

@@ -137,6 +137,15 @@ def entry_files(corpus: Path) -> list[Path]:
     return sorted(corpus.glob(f"*/*{SUFFIX}")) if corpus.is_dir() else []
 
 
+def is_entry(path: Path) -> bool:
+    """Whether a YAML file is a corpus entry rather than a spec: it has a top-level ``scenario_digest``
+    field (looked for in the text, so that nothing is parsed)."""
+    try:
+        return re.search(r"^scenario_digest:", Path(path).read_text(errors="replace"), re.MULTILINE) is not None
+    except OSError:
+        return False
+
+
 def misplaced(corpus: Path, path: Path) -> str:
     """Why a YAML file under ``corpus`` is not where an entry lives (``<corpus>/<spec>/<id>.yaml``), or ``""``.
 

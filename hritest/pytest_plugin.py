@@ -258,13 +258,7 @@ class CorpusItem(pytest.Item):
 
     def repr_failure(self, excinfo: pytest.ExceptionInfo[BaseException], style: Any = None) -> Any:
         if isinstance(excinfo.value, HriFailure):
-            entry = self.entry
-            theta = ",".join(repr(v) for v in entry.theta.values())
-            return (
-                f"{excinfo.value}\ncorpus file: {_shown(entry.path, self.config)}\n"
-                f"replay it: hritest replay {_shown(entry.spec_path, self.config)} --seed {entry.seed} "
-                f"--theta {theta}"
-            )
+            return f"{excinfo.value}\nreplay it: hritest replay {_shown(self.entry.path, self.config)}"
         if isinstance(excinfo.value, HritestError):
             return f"{self._title()}: {excinfo.value}"
         return super().repr_failure(excinfo)

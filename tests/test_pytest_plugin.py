@@ -194,8 +194,7 @@ def test_fixed_passing_regressed_still_failing_and_now_passing(project):
             "*goal_distance*",
             "  recorded: fails objective >= 8 (objective=10)",
             "  now:      fails objective >= 8 (objective=9.425)",
-            f"corpus file: tests/hri_failures/toy/{regressed.name}",
-            "replay it: hritest replay specs/toy.yaml --seed 0 --theta 0.6,0.05,0.6,0.05,0.05,0.05,0.05",
+            f"replay it: hritest replay tests/hri_failures/toy/{regressed.name}",
         ]
     )
     result.stdout.fnmatch_lines(

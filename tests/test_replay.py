@@ -82,6 +82,26 @@ def test_a_tampered_stored_objective_is_a_finding(run, tmp_path):
     assert (tmp_path / "t.rrd").is_file()  # the recording is still written, to look at
 
 
+def test_a_corpus_entry_replays_against_what_it_recorded(run, tmp_path, monkeypatch):
+    corpus = tmp_path / "corpus"
+    assert runner.invoke(app, ["promote", str(run), "--top", "1", "--to", str(corpus)]).exit_code == 0
+    [entry] = corpus.glob("toy/*.yaml")
+    monkeypatch.chdir(tmp_path)
+    result = runner.invoke(app, ["replay", str(entry)])
+    assert result.exit_code == 0, result.output
+    assert f"corpus entry toy/{entry.stem} as recorded" in result.output and "replay matches" in result.output
+    assert "stored:   fails objective >= 8 (objective=" in result.output
+    assert (tmp_path / "recordings" / f"{entry.stem}.rrd").is_file()
+
+    text = entry.read_text()
+    objective = next(line for line in text.splitlines() if line.startswith("objective: "))
+    entry.write_text(text.replace(objective, "objective: 1.5"))
+    result = runner.invoke(app, ["replay", str(entry)])
+    assert result.exit_code == 1, result.output
+    assert "replay does NOT match" in result.output
+    assert runner.invoke(app, ["replay", str(entry), "--failure", "1"]).exit_code == 2
+
+
 def test_compare_is_exact_on_verdicts_and_tolerant_on_numbers():
     stored = {"status": "ok", "failure": True, "objective": 10.0, "measures": [0.1, None]}
     same = {"status": "ok", "failure": True, "objective": 10.0 + 0.5 * TOLERANCE, "measures": [0.1, None]}
