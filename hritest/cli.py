@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import math
 import os
 import signal
 import tempfile
@@ -429,6 +430,10 @@ def search(
         raise typer.BadParameter("only a resumed run is trusted; use it with --resume RUN", param_hint="--trust")
     if workers < 1:
         raise typer.BadParameter(f"must be at least 1, got {workers}", param_hint="--workers")
+    if not 0 < timeout < math.inf:  # 0, a negative number or NaN would disable the timeout silently
+        raise typer.BadParameter(f"must be a number of seconds above 0, got {timeout}", param_hint="--timeout")
+    if out_dir is not None and out_dir.exists() and not out_dir.is_dir():
+        raise typer.BadParameter(f"{out_dir} is a file; give a folder for the run directory", param_hint="--out")
     if device not in ("auto", "cpu", "cuda"):
         raise typer.BadParameter(f"must be auto, cpu or cuda, not {device!r}", param_hint="--device")
     backend = qd.Backend(workers=workers, cluster=cluster, timeout=timeout)

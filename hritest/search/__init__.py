@@ -52,7 +52,7 @@ def _dask_client(address: str):  # noqa: ANN202 - distributed.Client
         raise HritestError("--cluster needs Dask: pip install 'hritest[cluster]'") from None
     try:
         return Client(address, timeout=10)
-    except (OSError, TimeoutError) as exc:
+    except (OSError, TimeoutError, ValueError) as exc:  # ValueError: not an address
         raise HritestError(
             f"cannot reach the Dask scheduler at {address} ({exc}); check the address and that "
             "'dask scheduler' is running there"

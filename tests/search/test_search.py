@@ -251,10 +251,21 @@ def test_resume_refuses_bad_run_directories(toy_spec, tmp_path):
 
 def test_bad_arguments_exit_2_and_write_nothing(toy_spec, tmp_path):
     spec = toy_spec()
-    for args in (["--workers", "0"], ["--algorithm", "nope"], ["--budget", "0"]):
+    bad = (
+        ["--workers", "0"],
+        ["--algorithm", "nope"],
+        ["--budget", "0"],
+        *(["--timeout", value] for value in ("0", "-1", "nan")),  # none may switch the timeout off
+        ["--cluster", "not-an-address"],
+    )
+    for args in bad:
         result = runner.invoke(app, ["search", str(spec), "--out", str(tmp_path / "run"), *args])
         assert result.exit_code == 2, (args, result.output)
         assert not (tmp_path / "run").exists()
+    (tmp_path / "a-file").write_text("mine")
+    result = runner.invoke(app, ["search", str(spec), "--out", str(tmp_path / "a-file")], env={"COLUMNS": "500"})
+    assert result.exit_code == 2 and "is a file" in result.output
+    assert (tmp_path / "a-file").read_text() == "mine"
     result = runner.invoke(app, ["search", str(spec), "--cluster", "tcp://127.0.0.1:1", "--out", str(tmp_path / "run")])
     assert result.exit_code == 2 and ("Dask" in result.output or "cannot reach" in result.output)
     assert not (tmp_path / "run").exists()
