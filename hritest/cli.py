@@ -248,9 +248,13 @@ def _domain_and_theta(spec: Path, theta: str):  # noqa: ANN202 - (Domain, np.nda
 
     domain = compile_spec(load_spec(spec))
     try:
-        values = np.array([float(v) for v in theta.replace(" ", "").split(",") if v != ""])
+        values = np.array([float(v) for v in theta.replace(" ", "").split(",")])
     except ValueError:
-        raise typer.BadParameter(f"{theta!r} is not a comma-separated list of numbers", param_hint="--theta") from None
+        raise typer.BadParameter(
+            f"{theta!r} is not a comma-separated list of numbers (no slot may be empty)", param_hint="--theta"
+        ) from None
+    if not np.all(np.isfinite(values)):
+        raise typer.BadParameter(f"{theta!r}: every value must be a finite number", param_hint="--theta")
     if values.shape != (domain.space.dim,):
         raise typer.BadParameter(
             f"got {len(values)} values; {spec} needs {domain.space.dim}: {', '.join(domain.space.labels)}",

@@ -165,3 +165,13 @@ def test_on_a_terminal_the_progress_bar_fits_its_width(monkeypatch, width):
     [line] = screen.export_text().splitlines()  # one line, not wrapped
     assert len(line) <= width
     assert line.startswith("search ") and "1234/100000" in line and "QD-score" in line
+
+
+@pytest.mark.parametrize(
+    "theta", ["0.6,0.05,,0.6,0.1,0.01,0,0", "nan,0.05,0.6,0.1,0.01,0,0", "0.6,0.05,0.6,0.1,0.01,0,inf", "0.6,x"]
+)
+@pytest.mark.parametrize("command", ["simulate", "repair"])
+def test_a_bad_theta_is_an_input_error(toy_spec, command, theta):
+    result = runner.invoke(app, [command, str(toy_spec()), "--theta", theta], env={"COLUMNS": "500"})
+    assert result.exit_code == 2 and "--theta" in result.output, result.output
+    assert "Traceback" not in result.output
