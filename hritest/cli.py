@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 import os
 import signal
+import sys
 import tempfile
 import threading
 import time
@@ -314,7 +316,8 @@ def simulate(
     from hritest.records import clauses_text
 
     domain, values = _domain_and_theta(spec, theta)
-    evaluation = evaluate(domain, values, seed=seed)
+    with contextlib.redirect_stdout(sys.stderr):  # what a plugin prints must not break --json
+        evaluation = evaluate(domain, values, seed=seed)
     data = {
         "status": evaluation.status,
         "failure": evaluation.failure,

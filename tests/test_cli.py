@@ -175,3 +175,11 @@ def test_a_bad_theta_is_an_input_error(toy_spec, command, theta):
     result = runner.invoke(app, [command, str(toy_spec()), "--theta", theta], env={"COLUMNS": "500"})
     assert result.exit_code == 2 and "--theta" in result.output, result.output
     assert "Traceback" not in result.output
+
+
+def test_what_a_plugin_prints_does_not_break_simulate_json(toy_spec):
+    spec = toy_spec("time_limit: 10.0\n", "time_limit: 10.0\n  params: {chatty: true}\n")
+    result = runner.invoke(app, ["simulate", str(spec), "--theta", NOMINAL, "--json"])
+    assert result.exit_code in (0, 1), result.output
+    assert json.loads(result.stdout)["status"] == "ok"
+    assert "toy task: running" in result.stderr
