@@ -808,7 +808,7 @@ def promote(
             )
         promoted = hc.promote(run, corpus=folder, top=top)
         for p in promoted:
-            verb = "[green]added[/green]  " if p.added else "unchanged"
+            verb = "[green]added[/green]  " if p.added else "upgraded " if p.upgraded else "unchanged"
             out.print(f"{verb} {p.path}  (evaluation {p.evaluation}, objective {p.objective:.6g})", highlight=False)
         added = sum(p.added for p in promoted)
         out.print(

@@ -336,13 +336,15 @@ class Promoted:
     evaluation: int
     objective: float
     added: bool  # False: the corpus already held it (its status is left as it was)
+    upgraded: bool = False  # it held it in an older format: rewritten in this one, its status kept
 
 
 def promote(run_path: Path, *, corpus: Path, top: int | None = None) -> list[Promoted]:
     """Copies ``top`` failures of a run (all by default) into the corpus: the worst failure of each
     clause of the failure condition that fired, then the worst of the rest (:func:`chosen`).
 
-    Idempotent: a failure already in the corpus (same scenario digest) is left untouched.
+    Idempotent: a failure already in the corpus (same scenario digest) is left untouched, unless it was
+    written in an older format: then it is rewritten in this one (with an outcome digest), its status kept.
 
     Raises:
         RunDirectoryError: not a run directory.
@@ -374,16 +376,19 @@ def promote(run_path: Path, *, corpus: Path, top: int | None = None) -> list[Pro
     labels = domain.space.labels
     folder = Path(corpus) / domain.spec.name
     _writable(folder)
+    scenarios = {i: scenario_digest(spec_digest, records[i].theta_repaired, records[i].seed) for i in ids}
+    # every entry already there is read before any is written: a malformed one changes nothing
+    held = {i: load_entry(p) for i in ids if (p := folder / f"{scenarios[i][:12]}.yaml").exists()}
     done = []
     for index in ids:
-        record = records[index]
-        scenario = scenario_digest(spec_digest, record.theta_repaired, record.seed)
+        record, scenario, old = records[index], scenarios[index], held.get(index)
         path = folder / f"{scenario[:12]}.yaml"
-        added = not path.exists()
-        if added:
+        added = old is None
+        upgraded = old is not None and old.format < FORMAT
+        if added or upgraded:
             data = {
                 "format": FORMAT,
-                "status": "open",
+                "status": "open" if old is None else old.status,
                 "spec": os.path.relpath(spec_file.resolve(), folder.resolve()),
                 "spec_name": domain.spec.name,
                 "spec_digest": spec_digest,
@@ -411,7 +416,7 @@ def promote(run_path: Path, *, corpus: Path, top: int | None = None) -> list[Pro
                 },
             }
             atomic_write(path, dump_entry(data))
-        done.append(Promoted(path=path, evaluation=index, objective=record.objective, added=added))
+        done.append(Promoted(path=path, evaluation=index, objective=record.objective, added=added, upgraded=upgraded))
     return done
 
 

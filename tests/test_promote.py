@@ -107,6 +107,23 @@ def test_top_takes_the_worst_and_mark_fixed_flips_status(run, tmp_path):
     assert [load_entry(e.path).status for e in entries] == ["fixed", "fixed"]
 
 
+def test_promoting_again_upgrades_a_format_1_entry_and_keeps_its_status(run, tmp_path):
+    corpus = tmp_path / "corpus"
+    assert promote(run, "--to", corpus, "--top", 1).exit_code == 0
+    [path] = corpus.glob("toy/*.yaml")
+    data = yaml.safe_load(path.read_text())
+    for key in ("outcome_digest", "outcome_parts", "seconds", "why"):
+        del data[key]
+    path.write_text(yaml.safe_dump({**data, "format": 1, "status": "fixed"}))
+    assert load_entry(path).format == 1
+
+    result = promote(run, "--to", corpus, "--top", 1)
+    assert result.exit_code == 0, result.output
+    assert "upgraded" in result.output
+    entry = load_entry(path)
+    assert (entry.format, entry.status) == (2, "fixed") and entry.outcome_parts and entry.why
+
+
 def test_the_default_corpus_comes_from_the_nearest_pyproject(run, tmp_path, monkeypatch):
     (tmp_path / "pyproject.toml").write_text('[project]\nname = "mine"\n\n[tool.hritest]\ncorpus = "hri/corpus"\n')
     (tmp_path / "src").mkdir()
