@@ -87,7 +87,7 @@ def test_value_iteration_converges_to_a_soft_bellman_fixed_point():
 
 
 def test_non_convergence_raises():
-    with pytest.raises(m.ValueIterationDiverged, match="1 sweeps"):
+    with pytest.raises(m.ValueIterationError, match="1 sweeps"):
         solve([[0.6, 0.05]], 0, max_iter=1)
 
 
