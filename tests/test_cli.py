@@ -183,3 +183,9 @@ def test_what_a_plugin_prints_does_not_break_simulate_json(toy_spec):
     assert result.exit_code in (0, 1), result.output
     assert json.loads(result.stdout)["status"] == "ok"
     assert "toy task: running" in result.stderr
+
+
+def test_replay_exits_3_when_the_scenario_cannot_be_evaluated(toy_spec, tmp_path):
+    args = ["replay", str(toy_spec(*FAULTY)), "--theta", NOMINAL, "--out", str(tmp_path / "r.rrd")]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 3, result.output
