@@ -33,18 +33,19 @@ imports the heavy modules when it runs.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 import os
 import re
 from collections.abc import Collection, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from hritest.errors import HritestError
+
+if TYPE_CHECKING:
+    from hritest.replay import Replay
 
 FORMAT = 2
 FORMATS = (1, 2)  # the formats this hritest reads
@@ -164,12 +165,6 @@ def misplaced(corpus: Path, path: Path) -> str:
     return ""
 
 
-def scenario_digest(spec_digest: str, theta_repaired: Sequence[float], seed: int) -> str:
-    """sha256 of the spec digest, the repaired theta and the seed: one scenario's identity."""
-    payload = json.dumps([spec_digest, [float(v) for v in theta_repaired], int(seed)], separators=(",", ":"))
-    return hashlib.sha256(payload.encode()).hexdigest()
-
-
 # --- reading -----------------------------------------------------------------------------------
 
 
@@ -209,6 +204,8 @@ def load_entry(path: Path) -> Entry:
         raise field.bad("theta_repaired", f"must have the same labels as theta ({', '.join(theta)})")
     seed = field.integer("seed")
     scenario = field.text("scenario_digest")
+    from hritest.records import scenario_digest  # here: collecting the corpus imports no more than it needs
+
     if scenario != scenario_digest(digest, repaired.values(), seed):
         raise field.bad(
             "scenario_digest",
@@ -352,6 +349,7 @@ def promote(run_path: Path, *, corpus: Path, top: int | None = None) -> list[Pro
     """
     from hritest import replay
     from hritest.outcome_digest import outcome_digest
+    from hritest.records import scenario_digest
     from hritest.rundir import RunDirectory, atomic_write, digest
 
     run = RunDirectory.open(run_path)
@@ -423,6 +421,8 @@ def promote(run_path: Path, *, corpus: Path, top: int | None = None) -> list[Pro
 def new_failures(found: Any, held: Collection[str]) -> list[str]:
     """The failures of a finished search (a :class:`hritest.search.Search`) whose scenario digest is not
     in ``held``, one line each: its id in the corpus, objective, measures and the clauses that held."""
+    from hritest.records import scenario_digest
+
     spec_digest = found.run_dir.meta["spec_digest"]
     names = [m.name for m in found.domain.measures]
     lines = []
@@ -493,3 +493,43 @@ def mark_fixed(corpus: Path, ids: list[str]) -> list[tuple[Path, str]]:
         if status != "fixed":
             set_status(path, "fixed")
     return before
+
+
+def replay_entry(path: Path, *, tolerance: float = 1e-6) -> Replay:
+    """Re-simulates a corpus entry (its raw theta and seed, with the spec it names, in this process)
+    and compares with what it recorded.
+
+    Raises:
+        CorpusError: a malformed entry, a spec that is gone, or a theta of other labels.
+        SpecError: its spec does not compile.
+    """
+    from hritest.domain import compile_spec
+    from hritest.records import Status
+    from hritest.replay import replay_outcome
+    from hritest.spec import load_spec
+
+    entry = load_entry(path)
+    if not entry.spec_path.is_file():
+        raise CorpusError(f"{path}: field 'spec' names {entry.spec_path}, which no longer exists")
+    domain = compile_spec(load_spec(entry.spec_path))
+    if list(entry.theta) != domain.space.labels:
+        raise CorpusError(
+            f"{path}: field 'theta' has components {', '.join(entry.theta)}, but {entry.spec_name}'s theta is "
+            f"{', '.join(domain.space.labels)}"
+        )
+    stored = {
+        "status": Status.OK,
+        "failure": True,
+        "objective": entry.objective,
+        "measures": [entry.measures.get(m.name) for m in domain.measures],
+    }
+    replayed = replay_outcome(
+        domain,
+        theta=list(entry.theta.values()),
+        seed=entry.seed,
+        stored=stored,
+        against=f"corpus entry {entry.spec_name}/{entry.id} as recorded",
+        spec_digest=entry.spec_digest,
+        tolerance=tolerance,
+    )
+    return replace(replayed, stored_why="; ".join(entry.why))

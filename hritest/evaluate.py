@@ -34,13 +34,13 @@ def evaluate_with_rollout(domain: Domain, theta: np.ndarray, *, seed: int = 0) -
     start = time.perf_counter()
     theta = np.asarray(theta, dtype=float)
     repaired = domain.repair(theta)
-    base = dict(
-        theta=theta.copy(),
-        theta_repaired=repaired.theta,
-        repair_cost=repaired.cost,
-        regions=repaired.regions,
-        seed=seed,
-    )
+    base = {
+        "theta": theta.copy(),
+        "theta_repaired": repaired.theta,
+        "repair_cost": repaired.cost,
+        "regions": repaired.regions,
+        "seed": seed,
+    }
     rollout = None
     if not repaired.ok:
         evaluation = Evaluation(**base, status=Status(repaired.status), message=repaired.message)

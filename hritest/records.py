@@ -6,6 +6,8 @@ Every status an evaluation can end with is a :class:`Status`; nothing compares s
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -219,6 +221,12 @@ def worst_of_each_clause(failures: Sequence[EvaluationRecord]) -> dict[str, Eval
     return worst
 
 
+def scenario_digest(spec_digest: str, theta_repaired: Sequence[float], seed: int) -> str:
+    """sha256 of the spec digest, the repaired theta and the seed: one scenario's identity."""
+    payload = json.dumps([spec_digest, [float(v) for v in theta_repaired], int(seed)], separators=(",", ":"))
+    return hashlib.sha256(payload.encode()).hexdigest()
+
+
 def clauses_text(clauses: Sequence[Clause]) -> str:
     """``objective >= 15 (objective=17.2); approach >= 0.3 (approach=0.41)``: one line for humans."""
     return "; ".join(map(str, clauses))
@@ -248,5 +256,6 @@ __all__ = [
     "Status",
     "clauses_text",
     "rank_failures",
+    "scenario_digest",
     "worst_of_each_clause",
 ]

@@ -21,12 +21,11 @@ from typing import Any
 import numpy as np
 import yaml
 
-from hritest.corpus import CorpusError, load_entry, scenario_digest
 from hritest.domain import Domain, compile_spec
 from hritest.errors import HritestError
 from hritest.evaluate import evaluate_with_rollout
 from hritest.protocols import Rollout
-from hritest.records import Evaluation, EvaluationRecord, Status, clauses_text, rank_failures
+from hritest.records import Evaluation, EvaluationRecord, clauses_text, rank_failures, scenario_digest
 from hritest.rundir import RunDirectory
 from hritest.spec import load_spec
 
@@ -189,41 +188,6 @@ def replay_record(
         tolerance=tolerance,
     )
     return replace(replayed, stored_why=clauses_text(record.fired))
-
-
-def replay_entry(path: Path, *, tolerance: float = TOLERANCE) -> Replay:
-    """Re-simulates a corpus entry (its raw theta and seed, with the spec it names, in this process)
-    and compares with what it recorded.
-
-    Raises:
-        CorpusError: a malformed entry, a spec that is gone, or a theta of other labels.
-        SpecError: its spec does not compile.
-    """
-    entry = load_entry(path)
-    if not entry.spec_path.is_file():
-        raise CorpusError(f"{path}: field 'spec' names {entry.spec_path}, which no longer exists")
-    domain = compile_spec(load_spec(entry.spec_path))
-    if list(entry.theta) != domain.space.labels:
-        raise CorpusError(
-            f"{path}: field 'theta' has components {', '.join(entry.theta)}, but {entry.spec_name}'s theta is "
-            f"{', '.join(domain.space.labels)}"
-        )
-    stored = {
-        "status": Status.OK,
-        "failure": True,
-        "objective": entry.objective,
-        "measures": [entry.measures.get(m.name) for m in domain.measures],
-    }
-    replayed = replay_outcome(
-        domain,
-        theta=list(entry.theta.values()),
-        seed=entry.seed,
-        stored=stored,
-        against=f"corpus entry {entry.spec_name}/{entry.id} as recorded",
-        spec_digest=entry.spec_digest,
-        tolerance=tolerance,
-    )
-    return replace(replayed, stored_why="; ".join(entry.why))
 
 
 def replay_outcome(

@@ -25,7 +25,7 @@ from hritest.corpus import dump_entry, load_entry
 from hritest.domain import compile_spec
 from hritest.evaluate import evaluate
 from hritest.outcome_digest import outcome_digest
-from hritest.replay import scenario_digest
+from hritest.records import scenario_digest
 from hritest.rundir import digest
 from hritest.spec import load_spec
 

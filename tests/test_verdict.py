@@ -7,10 +7,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from hritest.corpus import dump_entry, load_entry, scenario_digest
+from hritest.corpus import dump_entry, load_entry
 from hritest.domain import compile_spec
 from hritest.evaluate import evaluate
-from hritest.records import Status
+from hritest.records import Status, scenario_digest
 from hritest.spec import load_spec
 from hritest.verdict import SeedReplay, Verdict, changes_since, judge
 

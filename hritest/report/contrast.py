@@ -33,7 +33,8 @@ def contrast(data: RunData, failure: EvaluationRecord, *, search: bool = True, b
     """The counterfactual of ``failure``: read back if this scenario's was searched before, else
     searched now (unless not ``search``)."""
     from hritest.counterfactual import CounterfactualError, counterfactual
-    from hritest.replay import run_domain, scenario_digest
+    from hritest.records import scenario_digest
+    from hritest.replay import run_domain
 
     path = data.path / "counterfactuals" / f"{failure.index}.json"
     digest = scenario_digest(data.meta["spec_digest"], failure.theta_repaired, failure.seed)
@@ -83,7 +84,7 @@ def _record(domain: Any, data: RunData, failure: EvaluationRecord, found: Any, p
     """The failure and its counterfactual simulated again with their rollouts, into one recording."""
     from hritest.evaluate import evaluate_with_rollout
     from hritest.recording import Episode, write_episodes
-    from hritest.replay import scenario_digest
+    from hritest.records import scenario_digest
 
     episodes = []
     for name, theta in (("failure", failure.theta), ("passing", found.theta)):

@@ -33,7 +33,8 @@ def record_failures(data: RunData, failures: Sequence[EvaluationRecord]) -> dict
     unless a recording of that very scenario is there already (made by the search's own report, or
     an earlier one): recordings are made once per scenario."""
     from hritest.recording import check_writable, write_recording
-    from hritest.replay import replay_record, run_domain, scenario_digest
+    from hritest.records import scenario_digest
+    from hritest.replay import replay_record, run_domain
 
     if not failures:
         return {}

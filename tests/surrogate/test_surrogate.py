@@ -139,7 +139,7 @@ def eager_outputs(model, objective, x):
 
 
 def test_the_penalty_pulls_the_inner_objective_down_outside_the_bounds(teleop_data):
-    domain, theta, grids, targets = teleop_data
+    domain, theta, _, _ = teleop_data
     objective = SurrogateObjective(domain, surrogate_for(domain))
     inside = theta[:1].astype(np.float64)
     outside = inside.copy()
