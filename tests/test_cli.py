@@ -11,7 +11,8 @@ import pytest
 from typer.testing import CliRunner
 
 import hritest
-from hritest.cli import ExitCode, _Progress, app
+from hritest.cli import ExitCode, app
+from hritest.cli.runs import Progress
 
 runner = CliRunner()
 
@@ -156,10 +157,10 @@ def test_on_a_terminal_the_progress_bar_fits_its_width(monkeypatch, width):
     from hritest.search import Snapshot
     from hritest.search.archives import Summary
 
-    monkeypatch.setattr("hritest.cli.err", Console(force_terminal=True, width=width, file=io.StringIO()))
+    monkeypatch.setattr("hritest.cli.runs.err", Console(force_terminal=True, width=width, file=io.StringIO()))
     screen = Console(force_terminal=True, width=width, record=True, file=io.StringIO())
     summary = Summary(qd_score=123456.7, normalized_qd_score=0.5, coverage=0.4321, best=9.87, elites=42)
-    with _Progress(quiet=False) as progress:
+    with Progress(quiet=False) as progress:
         progress(Snapshot(evaluations=1234, budget=100000, summary=summary, failures=56, failed=7))
         screen.print(progress.bar.get_renderable())
     [line] = screen.export_text().splitlines()  # one line, not wrapped

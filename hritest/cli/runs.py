@@ -1,363 +1,27 @@
-"""The ``hritest`` command line; its exit codes are :class:`ExitCode`, the same for every command."""
+"""The commands of a search and what comes of it: search, report, replay, shrink and promote."""
 
 from __future__ import annotations
 
-import contextlib
-import functools
 import math
 import os
-import signal
-import sys
-import tempfile
 import threading
 import time
-import traceback
-from enum import IntEnum
 from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
-from rich.markup import escape
 from rich.table import Table
 
-import hritest
-from hritest.errors import HritestError
-from hritest.interrupt import Interrupted, stop_on_signals
-
-app = typer.Typer(
-    no_args_is_help=True,
-    add_completion=False,
-    help="Find where a robot policy fails with people, and keep those failures as tests.",
-    pretty_exceptions_enable=False,
+from hritest.cli.app import (
+    ExitCode,
+    JsonOption,
+    command,
+    domain_and_theta,
+    err,
+    out,
+    print_json,
 )
-out = Console(soft_wrap=True)
-err = Console(stderr=True, soft_wrap=True)
-
-
-class ExitCode(IntEnum):
-    """What hritest's exit status means, for every command (README, "Exit codes")."""
-
-    OK = 0
-    FINDING = 1  # failures found, a replay that does not reproduce, a scenario that cannot be repaired
-    INPUT = 2  # bad input: a spec, plugin, argument, run directory or corpus file; the message says what
-    INCOMPLETE = 3  # an evaluation could not complete (plugin error, NaN, timeout, crash); a search: none did
-    BUG = 4  # hritest itself failed; the traceback is in a file the message names
-    INTERRUPTED = 128 + signal.SIGINT  # Ctrl-C; a search checkpointed and says how to resume
-    TERMINATED = 128 + signal.SIGTERM  # SIGTERM; the same
-
-
-SpecArg = Annotated[Path, typer.Argument(help="a hritest spec (YAML)", show_default=False)]
-
-
-def command(fn):  # noqa: ANN001, ANN201 - a typer command
-    """Registers ``fn`` as a command, whose exit status says what happened (:class:`ExitCode`).
-
-    hritest's own errors (bad input) become their message and exit 2; SIGINT and SIGTERM stop it
-    with 130 and 143 (a search first saying how to resume); any other exception is a bug in
-    hritest: one line, and its traceback in a file, exit 4. No traceback reaches the terminal.
-    """
-
-    @functools.wraps(fn)
-    def run(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
-        try:
-            with stop_on_signals():
-                return fn(*args, **kwargs)
-        except HritestError as exc:
-            err.print(str(exc), markup=False, highlight=False)
-            raise typer.Exit(ExitCode.INPUT) from None
-        except (Interrupted, KeyboardInterrupt) as exc:
-            raise typer.Exit(_interrupted(exc)) from None
-        except (typer.Exit, typer.Abort, typer.TyperException):
-            raise
-        except Exception as exc:
-            _bug(exc)
-            raise typer.Exit(ExitCode.BUG) from None
-
-    return app.command()(run)
-
-
-def _interrupted(exc: BaseException) -> ExitCode:
-    signum = exc.signum if isinstance(exc, Interrupted) else signal.SIGINT
-    run = exc.run if isinstance(exc, Interrupted) else None
-    name = "Ctrl-C" if signum == signal.SIGINT else signal.Signals(signum).name
-    if run is None:
-        err.print(f"stopped by {name}", highlight=False)
-    else:
-        err.print(
-            f"stopped by {name}; the run is checkpointed in {run}. Continue it with:\n  hritest search --resume {run}",
-            markup=False,
-            highlight=False,
-        )
-    return ExitCode.INTERRUPTED if signum == signal.SIGINT else ExitCode.TERMINATED
-
-
-def _bug(exc: Exception) -> None:
-    """Says that hritest failed, and where its traceback is: the run directory's error.log
-    when a search wrote one, else a new file in the temporary folder."""
-    path = getattr(exc, "traceback_file", None)
-    if path is None:
-        with tempfile.NamedTemporaryFile("w", prefix="hritest-error-", suffix=".log", delete=False) as log:
-            log.write("".join(traceback.format_exception(exc)))
-        path = log.name
-    last = traceback.format_exception_only(exc)[-1].strip()
-    err.print(
-        f"hritest failed ({last}). This is a bug in hritest, not in your spec or plugins; the traceback is "
-        f"in {path}. Please report it with that file (hritest {hritest.__version__}).",
-        markup=False,
-        highlight=False,
-    )
-
-
-def _version(value: bool) -> None:
-    if value:
-        out.print(f"hritest {hritest.__version__}")
-        raise typer.Exit()
-
-
-@app.callback()
-def _root(
-    version: Annotated[
-        bool, typer.Option("--version", callback=_version, is_eager=True, help="print the version and exit")
-    ] = False,
-) -> None:
-    """Find where a robot policy fails with people, and keep those failures as tests."""
-
-
-@command
-def validate(specs: Annotated[list[Path], typer.Argument(help="one or more spec files")]) -> None:
-    """Check specs: schema, names, plugins, expressions. Prints every problem with file:line:column."""
-    from hritest.domain import load_domain
-
-    bad = 0
-    for path in specs:
-        try:
-            load_domain(path)
-        except HritestError as exc:
-            bad += 1
-            err.print(f"[red]invalid[/red] {path}", highlight=False)
-            err.print(str(exc), markup=False, highlight=False)
-        else:
-            out.print(f"[green]ok[/green] {path}", highlight=False)
-    if bad:
-        raise typer.Exit(ExitCode.INPUT)
-
-
-@command
-def check(
-    spec: SpecArg,
-    scenarios: Annotated[int, typer.Option(min=0, help="random scenarios to try besides the nominal one")] = 3,
-    seed: Annotated[int, typer.Option(help="seed of the scenarios tried")] = 0,
-) -> None:
-    """Try a spec and its plugins before a search: exit 0 when ready, 2 with what to fix.
-
-    Compiles the spec, runs the nominal scenario (twice, for determinism) and a few random ones,
-    checks each rollout against the plugin contract, and says what one scenario costs.
-    """
-    from hritest.check import check_spec
-    from hritest.errors import SpecError
-
-    try:
-        report = check_spec(spec, scenarios=scenarios, seed=seed)
-    except SpecError as exc:
-        err.print(f"[red]x[/red] {spec} does not compile:", highlight=False)
-        err.print(str(exc), markup=False, highlight=False)
-        raise typer.Exit(ExitCode.INPUT) from None
-    for line in report.passed:
-        out.print(f"[green]ok[/green] {escape(line)}", highlight=False)
-    for note in report.notes:
-        out.print(f"[yellow]note[/yellow] {escape(note)}", highlight=False)
-    per = report.seconds_per_scenario
-    out.print(
-        f"one scenario takes {_duration(per)} (median of {len(report.seconds)}); the spec's budget of "
-        f"{report.budget} evaluations is about {_duration(per * report.budget)} of simulation on one worker",
-        highlight=False,
-    )
-    for finding in report.findings:
-        err.print(f"[red]x[/red] {escape(str(finding))}", highlight=False)
-    if not report.ok:
-        err.print(f"{len(report.findings)} finding(s): fix them before a search.", highlight=False)
-        raise typer.Exit(ExitCode.INPUT)
-    out.print(f"{spec}: ready to search.", highlight=False)
-
-
-def _duration(seconds: float) -> str:
-    for unit, size in (("h", 3600.0), ("min", 60.0), ("s", 1.0)):
-        if seconds >= size:
-            return f"{seconds / size:.3g} {unit}"
-    return f"{seconds * 1000:.3g} ms"
-
-
-@command
-def show(spec: SpecArg) -> None:
-    """Print the compiled scenario space (theta layout, bounds), archive, policies and failure condition."""
-    from hritest.domain import compile_spec
-    from hritest.spec import load_spec
-
-    domain = compile_spec(load_spec(spec))
-    s = domain.spec
-    out.print(f"[bold]{s.name}[/bold]  {s.description}".rstrip(), highlight=False)
-    out.print(
-        f"task {s.task.name} ({domain.task_cls.__name__}), time limit {s.task.time_limit:g} s, tick {s.task.dt:g} s",
-        highlight=False,
-    )
-    out.print(
-        f"robot {s.robot.policy} ({domain.robot_cls.__name__}), human {s.human.policy} ({domain.human_cls.__name__})",
-        highlight=False,
-    )
-
-    table = Table(title=f"theta: {domain.space.dim} components", title_justify="left")
-    for column in ("index", "component", "binds", "lower", "upper"):
-        table.add_column(column, justify="right" if column in ("index", "lower", "upper") else "left")
-    for slot in domain.space.slots:
-        for i, label in enumerate(slot.labels):
-            table.add_row(str(slot.start + i), label, slot.bind, f"{slot.lower:g}", f"{slot.upper:g}")
-    out.print(table)
-
-    cells = (
-        f"a cvt archive of {domain.archive_cells:,} cells"
-        if s.archive.type == "cvt"
-        else " x ".join(map(str, domain.archive_dims)) + " cells"
-    )
-    archive = Table(title=f"result archive: {cells}", title_justify="left")
-    for column in ("measure", "expression", "range", "cells"):
-        archive.add_column(column)
-    for m in domain.measures:
-        archive.add_row(m.name, m.expression.text, f"[{m.range[0]:g}, {m.range[1]:g}]", str(m.cells or "—"))
-    out.print(archive)
-    out.print(
-        f"objective {s.objective.expr} in [{s.objective.range[0]:g}, {s.objective.range[1]:g}] "
-        f"(search subtracts {s.objective.repair_weight:g} x repair cost)",
-        highlight=False,
-    )
-    out.print(f"failure when {s.failure}", highlight=False)
-    for c in s.constraints:
-        out.print("constraint " + ", ".join(f"{k}={v}" for k, v in c.model_dump().items()), highlight=False)
-    out.print(f"search {s.search.algorithm}, budget {s.search.budget}, seed {s.search.seed}", highlight=False)
-
-
-ThetaOption = Annotated[
-    str, typer.Option("--theta", help="comma-separated theta, in the order 'hritest show' lists", show_default=False)
-]
-JsonOption = Annotated[bool, typer.Option("--json", help="print JSON instead of a table")]
-
-
-def _domain_and_theta(spec: Path, theta: str):  # noqa: ANN202 - (Domain, np.ndarray)
-    import numpy as np
-
-    from hritest.domain import compile_spec
-    from hritest.spec import load_spec
-
-    domain = compile_spec(load_spec(spec))
-    try:
-        values = np.array([float(v) for v in theta.replace(" ", "").split(",")])
-    except ValueError:
-        raise typer.BadParameter(
-            f"{theta!r} is not a comma-separated list of numbers (no slot may be empty)", param_hint="--theta"
-        ) from None
-    if not np.all(np.isfinite(values)):
-        raise typer.BadParameter(f"{theta!r}: every value must be a finite number", param_hint="--theta")
-    if values.shape != (domain.space.dim,):
-        raise typer.BadParameter(
-            f"got {len(values)} values; {spec} needs {domain.space.dim}: {', '.join(domain.space.labels)}",
-            param_hint="--theta",
-        )
-    return domain, values
-
-
-def _print_json(data: dict) -> None:
-    import json
-
-    print(json.dumps(data, indent=2, default=float))
-
-
-@command
-def repair(spec: SpecArg, theta: ThetaOption, json: JsonOption = False) -> None:
-    """Repair one scenario: where its objects move to satisfy the constraints, and at what cost."""
-    domain, values = _domain_and_theta(spec, theta)
-    outcome = domain.repair(values)
-    data = {
-        "status": outcome.status,
-        "theta": values.tolist(),
-        "repaired": outcome.theta.tolist(),
-        "cost": outcome.cost,
-        "regions": outcome.regions,
-        "message": outcome.message,
-    }
-    if json:
-        _print_json(data)
-    else:
-        table = Table(title=f"repair: {outcome.status}, cost {outcome.cost:.6g}", title_justify="left")
-        for column in ("component", "given", "repaired", "moved"):
-            table.add_column(column, justify="left" if column == "component" else "right")
-        for label, a, b in zip(domain.space.labels, values, outcome.theta):
-            table.add_row(label, f"{a:.6g}", f"{b:.6g}", f"{b - a:+.3g}" if b != a else "")
-        out.print(table)
-        for name, region in outcome.regions.items():
-            out.print(f"{name} placed in {region}", highlight=False)
-        if outcome.message:
-            out.print(outcome.message, highlight=False)
-    if not outcome.ok:
-        raise typer.Exit(ExitCode.FINDING)
-
-
-@command
-def simulate(
-    spec: SpecArg,
-    theta: ThetaOption,
-    seed: Annotated[int, typer.Option(help="the evaluation seed")] = 0,
-    json: JsonOption = False,
-) -> None:
-    """Simulate one scenario: status, objective, measures and every metric.
-
-    Exit 1 if it is a failure, 3 if it could not be evaluated (its status says why).
-    """
-    from hritest.evaluate import evaluate
-    from hritest.records import clauses_text
-
-    domain, values = _domain_and_theta(spec, theta)
-    with contextlib.redirect_stdout(sys.stderr):  # what a plugin prints must not break --json
-        evaluation = evaluate(domain, values, seed=seed)
-    data = {
-        "status": evaluation.status,
-        "failure": evaluation.failure,
-        "clauses": [c.to_json() for c in evaluation.clauses],
-        "objective": evaluation.objective,
-        "search_objective": evaluation.search_objective,
-        "measures": dict(zip((m.name for m in domain.measures), evaluation.measures.tolist())),
-        "metrics": evaluation.metrics,
-        "theta": values.tolist(),
-        "theta_repaired": evaluation.theta_repaired.tolist(),
-        "repair_cost": evaluation.repair_cost,
-        "regions": evaluation.regions,
-        "seed": seed,
-        "seconds": evaluation.seconds,
-        "message": evaluation.message,
-    }
-    if json:
-        _print_json(data)
-    else:
-        verdict = "[red]FAILURE[/red]" if evaluation.failure else "[green]no failure[/green]"
-        out.print(f"{evaluation.status}: {verdict} ({domain.spec.failure}), simulated in {evaluation.seconds:.3f} s")
-        if evaluation.fired:
-            out.print(f"why: {escape(clauses_text(evaluation.fired))}", highlight=False)
-        table = Table(show_header=False)
-        rows = [
-            ("objective", evaluation.objective),
-            ("search objective", evaluation.search_objective),
-            ("repair cost", evaluation.repair_cost),
-            *data["measures"].items(),
-            *evaluation.metrics.items(),
-        ]
-        for name, value in rows:
-            table.add_row(name, f"{value:.6g}")
-        out.print(table)
-        if evaluation.message:
-            err.print(evaluation.message, markup=False, highlight=False)
-    if not evaluation.ok:
-        raise typer.Exit(ExitCode.INCOMPLETE)
-    if evaluation.failure:
-        raise typer.Exit(ExitCode.FINDING)
+from hritest.errors import HritestError
 
 
 @command
@@ -444,7 +108,7 @@ def search(
     if device not in ("auto", "cpu", "cuda"):
         raise typer.BadParameter(f"must be auto, cpu or cuda, not {device!r}", param_hint="--device")
     backend = qd.Backend(workers=workers, cluster=cluster, timeout=timeout)
-    with _Progress(quiet) as progress:
+    with Progress(quiet) as progress:
         if resume is not None:
             found = qd.resume(run_path=resume, backend=backend, progress=progress, trust=trust)
         else:
@@ -477,7 +141,7 @@ def search(
         raise typer.Exit(ExitCode.FINDING)
 
 
-class _Progress:
+class Progress:
     """Search progress on stderr: a bar that fits the terminal on one; without one (a CI log), a
     plain line when the search starts, every ``PLAIN_SECONDS`` while it runs (whatever it is
     doing, a long surrogate training included) and when it ends; nothing with ``quiet``."""
@@ -677,12 +341,12 @@ def replay(
                 "a corpus entry replays its own theta and seed: give neither", param_hint="--theta"
             )
         path = recording.check_writable(out_path or Path("recordings") / f"{target.stem}.rrd")
-        result = rp.replay_entry(target, tolerance=tolerance)
+        result = hc.replay_entry(target, tolerance=tolerance)
         title = f"{result.domain.spec.name}: corpus entry {target.stem}"
     else:
         if theta is None or failure is not None:
             raise typer.BadParameter("with a spec give --theta v1,v2,... (and no --failure)", param_hint="--theta")
-        domain, values = _domain_and_theta(target, theta)
+        domain, values = domain_and_theta(target, theta)
         if out_path is not None:
             recording.check_writable(out_path)
         result = rp.replay_theta(domain, values, seed=seed, spec_digest=digest(target), tolerance=tolerance)
@@ -727,7 +391,7 @@ def shrink(
 
     result, path = shrink_failure(run, failure, clause=clause, budget=budget)
     if json:
-        _print_json({"failure": failure, **result.to_json()})
+        print_json({"failure": failure, **result.to_json()})
         return
     table = Table(title=f"failure {failure}, shrunk: '{result.clause}' still holds", title_justify="left")
     for column in ("parameter", "original", "shrunk", "nominal", ""):
@@ -820,26 +484,3 @@ def promote(
         for path, before in hc.mark_fixed(folder, [i for ids in mark_fixed for i in ids.split(",") if i]):
             note = "was already fixed" if before == "fixed" else "open -> fixed"
             out.print(f"fixed {path}  ({note})", highlight=False)
-
-
-@command
-def new(
-    name: Annotated[
-        str,
-        typer.Argument(help="the domain's name: letters, digits and '_', starting with a letter", show_default=False),
-    ],
-    folder: Annotated[Path, typer.Option("--dir", help="where to write NAME.yaml and NAME_plugins.py")] = Path("."),
-) -> None:
-    """Start a domain: write NAME.yaml and NAME_plugins.py, a minimal spec and plugins that work as written.
-
-    Never overwrites: exit 2 if either file exists, or if NAME is not a valid name.
-    """
-    from hritest.scaffold import write_domain
-
-    spec, plugins = write_domain(name, folder=folder)
-    out.print(f"wrote {spec} and {plugins}", highlight=False)
-    out.print(f"next: hritest check {spec}, then hritest search {spec} --budget 200", highlight=False)
-
-
-if __name__ == "__main__":
-    app()

@@ -1,0 +1,5 @@
+"""``python -m hritest.cli``: the hritest command."""
+
+from hritest.cli import app
+
+app()
