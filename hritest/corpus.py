@@ -33,6 +33,7 @@ imports the heavy modules when it runs.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import re
@@ -336,9 +337,11 @@ class Promoted:
     upgraded: bool = False  # it held it in an older format: rewritten in this one, its status kept
 
 
-def promote(run_path: Path, *, corpus: Path, top: int | None = None) -> list[Promoted]:
+def promote(run_path: Path, *, corpus: Path, top: int | None = None, shrink: bool = False) -> list[Promoted]:
     """Copies ``top`` failures of a run (all by default) into the corpus: the worst failure of each
-    clause of the failure condition that fired, then the worst of the rest (:func:`chosen`).
+    clause of the failure condition that fired, then the worst of the rest (:func:`chosen`). With
+    ``shrink``, each is first shrunk (:mod:`hritest.shrink`, or read back from ``RUN/shrunk/``)
+    and its simplest version is kept instead.
 
     Idempotent: a failure already in the corpus (same scenario digest) is left untouched, unless it was
     written in an older format: then it is rewritten in this one (with an outcome digest), its status kept.
@@ -370,6 +373,8 @@ def promote(run_path: Path, *, corpus: Path, top: int | None = None) -> list[Pro
     if not ids:
         return []
     domain = replay.run_domain(run)
+    if shrink:
+        records |= {i: _shrunk(run, domain, records[i]) for i in ids}
     outcome = outcome_digest(domain)
     labels = domain.space.labels
     folder = Path(corpus) / domain.spec.name
@@ -410,12 +415,34 @@ def promote(run_path: Path, *, corpus: Path, top: int | None = None) -> list[Pro
                 "origin": {
                     "run": str(run.path.resolve()),
                     "evaluation": index,
+                    "shrunk": shrink,
                     "promoted": datetime.now(UTC).isoformat(timespec="seconds"),
                 },
             }
             atomic_write(path, dump_entry(data))
         done.append(Promoted(path=path, evaluation=index, objective=record.objective, added=added, upgraded=upgraded))
     return done
+
+
+def _shrunk(run: Any, domain: Any, record: Any) -> Any:
+    """The shrunk version of a failure's record: RUN/shrunk/ID.json when it holds this failure's
+    seed, else shrunk now (which writes it); simulated once more for its full record."""
+    from hritest.evaluate import evaluate
+    from hritest.records import EvaluationRecord
+    from hritest.shrink import shrink_failure
+
+    path = run.path / "shrunk" / f"{record.index}.json"
+    try:
+        stored = json.loads(path.read_text())
+    except (OSError, ValueError):
+        stored = {}
+    if stored.get("seed") != record.seed or len(stored.get("theta", ())) != len(record.theta):
+        result, _ = shrink_failure(run.path, record.index)
+        stored = {"theta": result.theta.tolist()}
+    evaluation = evaluate(domain, stored["theta"], seed=record.seed)
+    if not (evaluation.ok and evaluation.failure):
+        raise CorpusError(f"{path}: the shrunk scenario of failure {record.index} no longer fails; shrink it again")
+    return EvaluationRecord.of(evaluation, index=record.index, batch=record.batch)
 
 
 def new_failures(found: Any, held: Collection[str]) -> list[str]:

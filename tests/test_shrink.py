@@ -12,6 +12,7 @@ from typer.testing import CliRunner
 
 from hritest import search as qd
 from hritest.cli import app
+from hritest.corpus import load_entry
 from hritest.domain import compile_spec
 from hritest.evaluate import evaluate
 from hritest.shrink import ShrinkError, shrink
@@ -103,3 +104,25 @@ def test_the_command_prints_what_still_matters_and_stores_the_shrunk_scenario(do
 
     result = CliRunner().invoke(app, ["shrink", str(tmp_path / "run"), "--failure", "99999"])
     assert result.exit_code == 2 and "99999" in result.output
+
+
+def test_promote_shrink_keeps_the_simplest_version_of_each_failure(domain, tmp_path):
+    qd.start(
+        spec_file=tmp_path / "spec.yaml", out=tmp_path / "run", algorithm="random", budget=100, seed=0,
+        backend=qd.Backend(workers=1),
+    )  # fmt: skip
+    result = CliRunner().invoke(
+        app, ["promote", str(tmp_path / "run"), "--top", "1", "--shrink", "--to", str(tmp_path / "corpus")]
+    )
+    assert result.exit_code == 0, result.output
+    [path] = (tmp_path / "corpus" / "toy").glob("*.yaml")
+    entry = load_entry(path)
+    [failure] = [
+        f
+        for f in yaml.safe_load((tmp_path / "run" / "failures.yaml").read_text())["failures"]
+        if f["id"] == entry.origin["evaluation"]
+    ]
+    shrunk = json.loads((tmp_path / "run" / "shrunk" / f"{failure['id']}.json").read_text())
+    assert list(entry.theta.values()) == pytest.approx(shrunk["theta"]) and entry.origin["shrunk"] is True
+    assert evaluate(domain, np.array(shrunk["theta"]), seed=entry.seed).failure
+    assert any(row["matters"] for row in shrunk["parameters"].values())  # the nominal passes: something is needed

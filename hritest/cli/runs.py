@@ -6,6 +6,7 @@ import math
 import os
 import threading
 import time
+from collections import Counter
 from pathlib import Path
 from typing import Annotated
 
@@ -236,9 +237,7 @@ def _print_summary(found) -> None:  # noqa: ANN001 - hritest.search.Search
 
     state = found.state
     summary = Summary.of(state.result, found.domain.spec.objective.range)
-    statuses: dict[str, int] = {}
-    for record in found.records.values():
-        statuses[record["status"]] = statuses.get(record["status"], 0) + 1
+    statuses = Counter(record.status.value for record in found.records.values())
     table = Table(
         title=f"{found.domain.spec.name}: {state.algorithm}, seed {state.seed}",
         title_justify="left",
@@ -445,6 +444,9 @@ def promote(
             show_default=False,
         ),
     ] = None,
+    shrink: Annotated[
+        bool, typer.Option("--shrink", help="keep each failure's simplest version (hritest shrink) instead")
+    ] = False,
     mark_fixed: Annotated[
         list[str] | None,
         typer.Option(
@@ -470,7 +472,7 @@ def promote(
                 f"{run} is not a run directory; to mark several entries fixed repeat the "
                 "option: --mark-fixed ID --mark-fixed ID"
             )
-        promoted = hc.promote(run, corpus=folder, top=top)
+        promoted = hc.promote(run, corpus=folder, top=top, shrink=shrink)
         for p in promoted:
             verb = "[green]added[/green]  " if p.added else "upgraded " if p.upgraded else "unchanged"
             out.print(f"{verb} {p.path}  (evaluation {p.evaluation}, objective {p.objective:.6g})", highlight=False)
