@@ -93,7 +93,7 @@ def main() -> None:
                 "schedule": name,
                 "outer": steps[1:],  # the first step is the initial random batch
                 "wall": sum(steps[1:]),
-                "qd": found.state["progress"][-1]["qd_score"],
+                "qd": found.state.progress[-1].qd_score,
                 "mae": accuracy["objective_mae"],
             }
         )

@@ -29,7 +29,6 @@ from hritest.corpus import Entry
 COMPILE_SECONDS = 300.0  # worker start-up and compiling a spec (plugin imports, first numba compile)
 SEED_SECONDS = 30.0  # added to five times an entry's recorded seconds, per replayed seed
 UNKNOWN_SECONDS = 60.0  # per seed, for an entry that did not record how long it took (format 1)
-MAX_SEED = 2**63 - 1
 
 
 class WorkerError(Exception):
@@ -38,6 +37,8 @@ class WorkerError(Exception):
 
 def replay_seeds(entry: Entry, replays: int) -> list[int]:
     """The recorded seed first, then the ones after it: each can be replayed by hand with ``--seed``."""
+    from hritest.records import MAX_SEED
+
     return [(entry.seed + k) % (MAX_SEED + 1) for k in range(replays)]
 
 

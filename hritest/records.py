@@ -16,6 +16,10 @@ from typing import Any
 
 import numpy as np
 
+# The largest seed of a search or an evaluation: torch's generators take unsigned 64-bit seeds,
+# and hritest adds small offsets to a run's seed for its networks; half the range leaves them room.
+MAX_SEED = 2**63 - 1
+
 
 class Status(StrEnum):
     """How an evaluation ended. Only ``ok`` has an objective; the others say why not."""
@@ -195,11 +199,6 @@ class EvaluationRecord:
             clauses=tuple(Clause.from_json(c) for c in data.get("clauses", ())),
         )
 
-    def __getitem__(self, key: str) -> Any:
-        # Transitional, while the modules that read records by key move to attributes; the JSON
-        # form's value (None for a non-finite number), as those readers expect.
-        return self.to_json()[key]
-
 
 def rank_failures(records: Iterable[EvaluationRecord]) -> list[EvaluationRecord]:
     """Failures worst first: the one order the report, ``failures.yaml``, replay and promote share.
@@ -250,6 +249,7 @@ def _short(value: float) -> str:
 
 
 __all__ = [
+    "MAX_SEED",
     "Clause",
     "Evaluation",
     "EvaluationRecord",

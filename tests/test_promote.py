@@ -65,7 +65,7 @@ def test_promote_writes_one_readable_file_per_failure_and_is_idempotent(run, tmp
     assert {f: f.read_text() for f in sorted(corpus.glob("toy/*.yaml"))} == texts
 
     # The worst failure's entry holds what the run recorded.
-    records = {r["index"]: r for r in RunDirectory.open(run).evaluations()}
+    records = {r.index: r for r in RunDirectory.open(run).evaluations()}
     worst = stored[0]
     entries = {e.origin["evaluation"]: e for e in map(load_entry, files)}
     entry = entries[worst["id"]]
@@ -73,11 +73,11 @@ def test_promote_writes_one_readable_file_per_failure_and_is_idempotent(run, tmp
     meta = RunDirectory.open(run).meta
     assert entry.status == "open" and entry.spec_name == "toy"
     assert entry.spec_path == Path(meta["spec_file"]) and entry.spec_digest == meta["spec_digest"]
-    assert list(entry.theta.values()) == record["theta"]
-    assert list(entry.theta_repaired.values()) == record["theta_repaired"] == list(worst["theta"].values())
+    assert list(entry.theta.values()) == list(record.theta)
+    assert list(entry.theta_repaired.values()) == list(record.theta_repaired) == list(worst["theta"].values())
     assert list(entry.theta) == list(worst["theta"])  # labelled as 'hritest show' lists them
-    assert entry.objective == record["objective"] and entry.measures == worst["measures"]
-    assert entry.metrics == record["metrics"] and entry.seed == record["seed"]
+    assert entry.objective == record.objective and entry.measures == worst["measures"]
+    assert entry.metrics == record.metrics and entry.seed == record.seed
     assert entry.versions["hritest"] == meta["versions"]["hritest"]
     assert entry.versions["mujoco"] == meta["versions"]["mujoco"]
     assert entry.origin["run"] == str(run.resolve())

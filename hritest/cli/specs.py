@@ -23,6 +23,7 @@ from hritest.cli.app import (
     print_json,
 )
 from hritest.errors import HritestError
+from hritest.records import MAX_SEED
 
 
 @command
@@ -48,7 +49,7 @@ def validate(specs: Annotated[list[Path], typer.Argument(help="one or more spec 
 def check(
     spec: SpecArg,
     scenarios: Annotated[int, typer.Option(min=0, help="random scenarios to try besides the nominal one")] = 3,
-    seed: Annotated[int, typer.Option(help="seed of the scenarios tried")] = 0,
+    seed: Annotated[int, typer.Option(min=0, max=MAX_SEED, help="seed of the scenarios tried")] = 0,
 ) -> None:
     """Try a spec and its plugins before a search: exit 0 when ready, 2 with what to fix.
 
@@ -171,7 +172,7 @@ def repair(spec: SpecArg, theta: ThetaOption, json: JsonOption = False) -> None:
 def simulate(
     spec: SpecArg,
     theta: ThetaOption,
-    seed: Annotated[int, typer.Option(help="the evaluation seed")] = 0,
+    seed: Annotated[int, typer.Option(min=0, max=MAX_SEED, help="the evaluation seed")] = 0,
     json: JsonOption = False,
 ) -> None:
     """Simulate one scenario: status, objective, measures and every metric.

@@ -22,6 +22,7 @@ from pydantic import (
     model_validator,
 )
 
+from hritest.records import MAX_SEED
 from hritest.sim.layout import ROBOT_BASE
 from hritest.spec import expr
 
@@ -30,9 +31,6 @@ from hritest.spec import expr
 MAX_TICKS = 1_000_000
 MAX_BATCH = 100_000
 
-# The largest search seed: torch's generators take unsigned 64-bit seeds, and hritest adds small
-# offsets to the run's seed for its networks; half the range leaves them room.
-MAX_SEED = 2**63 - 1
 
 Name = Annotated[
     str,

@@ -244,6 +244,6 @@ def test_a_small_random_search_evaluates_every_scenario(tmp_path):
         backend=qd.Backend(workers=2, timeout=60),
     )
     records = RunDirectory.open(tmp_path / "run").evaluations()
-    assert sorted(r["index"] for r in records) == list(range(60))
-    assert all(r["status"] == "ok" for r in records), [r["message"] for r in records if r["status"] != "ok"]
-    assert any(r["failure"] for r in records) and not all(r["failure"] for r in records)
+    assert sorted(r.index for r in records) == list(range(60))
+    assert all(r.status == "ok" for r in records), [r.message for r in records if r.status != "ok"]
+    assert any(r.failure for r in records) and not all(r.failure for r in records)

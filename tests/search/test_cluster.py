@@ -52,9 +52,9 @@ def test_a_plugin_crash_on_a_cluster_fails_its_scenario_only(toy_spec, tmp_path,
         seed=1,
         backend=qd.Backend(cluster=cluster, timeout=10),
     )
-    statuses = {r["status"] for r in found.records.values() if r["theta"][4] > 0.045}
+    statuses = {r.status for r in found.records.values() if r.theta[4] > 0.045}
     assert statuses == {"plugin_error"}
-    assert {r["status"] for r in found.records.values() if r["theta"][4] <= 0.045} == {"ok"}
+    assert {r.status for r in found.records.values() if r.theta[4] <= 0.045} == {"ok"}
 
 
 @pytest.fixture
@@ -103,5 +103,5 @@ def test_a_worker_killed_mid_run_loses_no_evaluation(toy_spec, tmp_path, separat
     )
     assert killed.is_set() and workers[0].wait() is not None
     assert sorted(found.records) == list(range(150))
-    assert {r["status"] for r in found.records.values()} == {"ok"}
+    assert {r.status for r in found.records.values()} == {"ok"}
     assert len(lines.read_text().splitlines()) == 150  # each evaluation once

@@ -46,16 +46,16 @@ def test_each_algorithm_fills_both_archives_and_the_run_directory(toy_spec, tmp_
     ):
         assert (run / name).is_file(), name
     records = RunDirectory.open(run).evaluations()
-    assert sorted(r["index"] for r in records) == list(range(250))  # exactly the budget, none twice
-    assert all(r["status"] == "ok" for r in records)
+    assert sorted(r.index for r in records) == list(range(250))  # exactly the budget, none twice
+    assert all(r.status == "ok" for r in records)
     assert found.state.result.stats.num_elites > 1
     # The result archive holds raw objectives; the regularised ones only differ by the repair cost.
     for r in records:
-        assert r["search_objective"] == pytest.approx(r["objective"] - r["repair_cost"])
+        assert r.search_objective == pytest.approx(r.objective - r.repair_cost)
     failures = yaml.safe_load((run / "failures.yaml").read_text())["failures"]
     assert all(f["objective"] >= 8 for f in failures)
     assert len(failures) == sum(
-        r["failure"] for r in records if r["index"] in {int(i) for i in found.state.result.data("evaluation")}
+        r.failure for r in records if r.index in {int(i) for i in found.state.result.data("evaluation")}
     )
 
 
@@ -91,17 +91,17 @@ def test_a_misbehaving_plugin_fails_its_scenarios_only(toy_spec, tmp_path, fault
         backend=qd.Backend(workers=2, timeout=1.0),
     )
     records = RunDirectory.open(tmp_path / "run").evaluations()
-    assert sorted(r["index"] for r in records) == list(range(60))
-    bad = [r for r in records if r["theta"][4] > 0.045]
-    good = [r for r in records if r["theta"][4] <= 0.045]
+    assert sorted(r.index for r in records) == list(range(60))
+    bad = [r for r in records if r.theta[4] > 0.045]
+    good = [r for r in records if r.theta[4] <= 0.045]
     assert bad and good
-    assert {r["status"] for r in bad} == {status}
-    assert all(r["status"] == "ok" for r in good)  # neighbours of a crash are not blamed
-    assert all("retry" in r["message"] for r in bad)
+    assert {r.status for r in bad} == {status}
+    assert all(r.status == "ok" for r in good)  # neighbours of a crash are not blamed
+    assert all("retry" in r.message for r in bad)
     if fault == "raise":
         assert "task plugin ToyTask raised RuntimeError: toy plugin exploded" in bad[0]["message"]
     elites_ = {int(i) for i in found.state.result.data("evaluation")}
-    assert elites_.isdisjoint(r["index"] for r in bad)
+    assert elites_.isdisjoint(r.index for r in bad)
 
 
 def start_in_background(
@@ -143,7 +143,7 @@ def resume_to_the_end(run: Path) -> list[dict]:
     result = runner.invoke(app, ["search", "--resume", str(run), "--workers", "2", "--quiet"])
     assert result.exit_code in (0, 1) and isinstance(result.exception, SystemExit | None), result.output
     after = RunDirectory.open(run).evaluations()
-    assert sorted(r["index"] for r in after) == list(range(700))
+    assert sorted(r.index for r in after) == list(range(700))
     progress = np.loadtxt(run / "progress.csv", delimiter=",", skiprows=1, usecols=0)
     assert progress[-1] == 700
     return after
@@ -159,8 +159,8 @@ def test_a_killed_run_resumes_to_the_same_state(toy_spec, tmp_path):
     assert 350 < len(before) < 700
 
     after = resume_to_the_end(killed)
-    done_before = {r["index"]: r for r in before}
-    redone = [r for r in after if r["index"] in done_before and r != done_before[r["index"]]]
+    done_before = {r.index: r for r in before}
+    redone = [r for r in after if r.index in done_before and r != done_before[r.index]]
     assert not redone  # nothing finished before the kill was evaluated again
     assert elites(killed) == elites(tmp_path / "whole")
 
@@ -315,7 +315,7 @@ def test_sas_and_dsas_search_a_task_without_grids_and_resume(toy_spec, tmp_path,
     run.save_checkpoint(replace(load_state(run), budget=80))
     again = qd.resume(run_path=tmp_path / "run", backend=TWO)
     assert again.state.evaluations == 80
-    assert sorted(r["index"] for r in RunDirectory.open(tmp_path / "run").evaluations()) == list(range(80))
+    assert sorted(r.index for r in RunDirectory.open(tmp_path / "run").evaluations()) == list(range(80))
     assert again.state.proposer.outer > proposer.outer
 
     from hritest.report import load_run, write_report

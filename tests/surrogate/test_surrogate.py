@@ -195,7 +195,7 @@ def tiny_run(tmp_path: Path, out: str, algorithm: str, *, workers: int = 2) -> q
 def test_a_tiny_run_completes_and_resumes(tmp_path, algorithm):
     found = tiny_run(tmp_path, "run", algorithm)
     records = RunDirectory.open(tmp_path / "run").evaluations()
-    assert sorted(r["index"] for r in records) == list(range(60))
+    assert sorted(r.index for r in records) == list(range(60))
     assert found.state.proposer.outer >= 2
     accuracy = found.state.proposer.accuracy(found.domain)
     assert accuracy["held_out"] > 0 and np.isfinite(accuracy["objective_mae"])
@@ -207,7 +207,7 @@ def test_a_tiny_run_completes_and_resumes(tmp_path, algorithm):
     run.save_checkpoint(replace(load_state(run), budget=80))
     again = qd.resume(run_path=tmp_path / "run", backend=qd.Backend(workers=2, timeout=60))
     assert again.state.evaluations == 80
-    assert sorted(r["index"] for r in RunDirectory.open(tmp_path / "run").evaluations()) == list(range(80))
+    assert sorted(r.index for r in RunDirectory.open(tmp_path / "run").evaluations()) == list(range(80))
 
 
 def test_outside_the_bounds_the_prediction_is_that_of_the_clipped_theta(teleop_data):
@@ -237,7 +237,7 @@ def test_the_same_seed_gives_the_same_surrogate_run(tmp_path):
     tiny_run(tmp_path, "a", "sas", workers=2)
     tiny_run(tmp_path, "b", "sas", workers=1)
     assert (tmp_path / "a" / "archive.csv").read_text() == (tmp_path / "b" / "archive.csv").read_text()
-    thetas = [[r["theta"] for r in RunDirectory.open(tmp_path / run).evaluations()] for run in ("a", "b")]
+    thetas = [[r.theta for r in RunDirectory.open(tmp_path / run).evaluations()] for run in ("a", "b")]
     assert sorted(thetas[0]) == sorted(thetas[1])  # the same proposals, finished in any order
 
 
