@@ -23,5 +23,10 @@ demo: $(BIN)/hritest
 	$(BIN)/hritest search specs/collab.yaml --algorithm dsas --budget 250 --inner-iterations 100 \
 		|| test $$? -eq 1
 
+# Lint, formatting and the import layers (pyproject's [tool.ruff] and [tool.importlinter]) first:
+# they take seconds, the tests minutes.
 test: $(BIN)/hritest
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+	$(BIN)/lint-imports
 	$(BIN)/python -m pytest

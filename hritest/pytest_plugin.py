@@ -335,7 +335,9 @@ class SearchItem(pytest.Item):
             seed=None,
             backend=qd.Backend(workers=os.cpu_count() or 1),
         )
-        new = hc.new_failures(found, self.held)
+        from hritest.promote import new_failures
+
+        new = new_failures(found, self.held)
         if new:
             self.user_properties += [
                 ("hri_entry", f"{self.spec_name}/search"),

@@ -23,6 +23,7 @@ from hritest.cli.app import (
     print_json,
 )
 from hritest.errors import HritestError
+from hritest.records import MAX_SEED
 
 
 @command
@@ -40,7 +41,9 @@ def search(
     budget: Annotated[
         int | None, typer.Option(min=1, help="real evaluations (default: the spec's)", rich_help_panel="Search")
     ] = None,
-    seed: Annotated[int | None, typer.Option(help="default: the spec's", rich_help_panel="Search")] = None,
+    seed: Annotated[
+        int | None, typer.Option(min=0, max=MAX_SEED, help="default: the spec's", rich_help_panel="Search")
+    ] = None,
     out_dir: Annotated[
         Path | None, typer.Option("--out", help="run directory (default: runs/<spec>-<time>)", rich_help_panel="Run")
     ] = None,
@@ -301,7 +304,7 @@ def replay(
         typer.Option(help="the failure's id in the run (see its report or failures.yaml)", show_default=False),
     ] = None,
     theta: Annotated[str | None, typer.Option(help="comma-separated theta, with a SPEC", show_default=False)] = None,
-    seed: Annotated[int, typer.Option(help="the evaluation seed, with a SPEC")] = 0,
+    seed: Annotated[int, typer.Option(min=0, max=MAX_SEED, help="the evaluation seed, with a SPEC")] = 0,
     out_path: Annotated[
         Path | None,
         typer.Option(
@@ -462,6 +465,7 @@ def promote(
     One YAML file per failure, CORPUS/SPEC/ID.yaml, status open (xfail under pytest) or fixed (must not fail again).
     """
     from hritest import corpus as hc
+    from hritest.promote import promote as promote_run
 
     if run is None and not mark_fixed:
         raise typer.BadParameter("give a RUN directory to promote from, or --mark-fixed ID (or both)")
@@ -472,7 +476,7 @@ def promote(
                 f"{run} is not a run directory; to mark several entries fixed repeat the "
                 "option: --mark-fixed ID --mark-fixed ID"
             )
-        promoted = hc.promote(run, corpus=folder, top=top, shrink=shrink)
+        promoted = promote_run(run, corpus=folder, top=top, shrink=shrink)
         for p in promoted:
             verb = "[green]added[/green]  " if p.added else "upgraded " if p.upgraded else "unchanged"
             out.print(f"{verb} {p.path}  (evaluation {p.evaluation}, objective {p.objective:.6g})", highlight=False)
