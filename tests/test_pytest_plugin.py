@@ -418,7 +418,7 @@ def test_yaml_that_does_not_parse_is_a_collection_error(project):
     path.write_text(path.read_text() + "seed: [unclosed\n")
     result = project.pytester.runpytest()
     assert result.ret == pytest.ExitCode.INTERRUPTED
-    result.stdout.fnmatch_lines([f"hritest corpus: {path}:*: not valid YAML*"])
+    result.stdout.fnmatch_lines([f"hritest corpus: {path}:*: is not valid YAML*"])
 
 
 # --- selection --------------------------------------------------------------------------------------

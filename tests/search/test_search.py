@@ -99,7 +99,7 @@ def test_a_misbehaving_plugin_fails_its_scenarios_only(toy_spec, tmp_path, fault
     assert all(r.status == "ok" for r in good)  # neighbours of a crash are not blamed
     assert all("retry" in r.message for r in bad)
     if fault == "raise":
-        assert "task plugin ToyTask raised RuntimeError: toy plugin exploded" in bad[0]["message"]
+        assert "task plugin ToyTask raised RuntimeError: toy plugin exploded" in bad[0].message
     elites_ = {int(i) for i in found.state.result.data("evaluation")}
     assert elites_.isdisjoint(r.index for r in bad)
 
