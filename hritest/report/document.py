@@ -101,9 +101,15 @@ def run_document(
                         "reports, and which clauses held). Each kind is represented by its worst failure."
                     ),
                     Table(
-                        ["kind", "failures", "what sets it apart", "representative"],
+                        ["kind", "failures", "what sets it apart", "representative", "what it needs (shrunk)"],
                         [
-                            [str(i + 1), str(len(c.members)), "; ".join(c.traits) or "—", str(c.representative.index)]
+                            [
+                                str(i + 1),
+                                str(len(c.members)),
+                                "; ".join(c.traits) or "—",
+                                str(c.representative.index),
+                                _needs(data, c.representative.index),
+                            ]
                             for i, c in enumerate(data.clusters)
                         ],
                     ),
@@ -309,6 +315,16 @@ def _clause_blocks(data: RunData, recorded: Mapping[int, Recorded], link_base: P
         Text("The worst failure of each clause that held:"),
         _failure_table(data, rows, recorded, link_base, label="clause"),
     ]
+
+
+def _needs(data: RunData, index: int) -> str:
+    """The parameters a shrunk failure still needs away from nominal, or how to find them."""
+    shrunk = data.shrunk.get(index)
+    if shrunk is None or shrunk.get("seed") != next((r.seed for r in data.failures if r.index == index), None):
+        return f"hritest shrink {data.path} --failure {index}"
+    needed = [name for name, row in shrunk.get("parameters", {}).items() if row.get("matters")]
+    what = ", ".join(needed) or "nothing: the nominal scenario fails too"
+    return f"{what} ({shrunk.get('evaluations', '?')} simulations)"
 
 
 def _contrast_blocks(data: RunData, contrast: Contrast, link_base: Path) -> list:

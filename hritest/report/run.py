@@ -5,7 +5,7 @@ from __future__ import annotations
 import csv
 import json
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +27,7 @@ class RunData:
     failures: Sequence[EvaluationRecord]  # the reported failures, worst first
     clusters: Sequence[Cluster]  # the kinds of failure, largest first
     surrogate: Mapping[str, Any] | None
+    shrunk: Mapping[int, Mapping[str, Any]] = field(default_factory=dict)  # RUN/shrunk/ID.json, by id
 
     @property
     def name(self) -> str:
@@ -90,7 +91,19 @@ def load_run(path: Path) -> RunData:
         failures=failures,
         clusters=clusters,
         surrogate=json.loads(surrogate.read_text()) if surrogate.is_file() else None,
+        shrunk=_shrunk(run.path / "shrunk"),
     )
+
+
+def _shrunk(folder: Path) -> dict[int, dict[str, Any]]:
+    """What ``hritest shrink`` stored; a file that does not read is left out (shrink it again)."""
+    found = {}
+    for path in sorted(folder.glob("*.json")) if folder.is_dir() else ():
+        try:
+            found[int(path.stem)] = json.loads(path.read_text())
+        except (OSError, ValueError):
+            continue
+    return found
 
 
 def _read_progress(path: Path) -> list[dict[str, float]]:

@@ -277,3 +277,15 @@ def test_the_largest_kinds_failure_is_shown_beside_the_nearest_passing_scenario(
     made = (run / "counterfactuals" / f"{representative.index}.json").stat().st_mtime_ns
     write_report(run, recordings=2)  # a second report reads it back
     assert (run / "counterfactuals" / f"{representative.index}.json").stat().st_mtime_ns == made
+
+
+def test_a_kinds_representative_shows_what_its_shrunk_version_needs(tmp_path):
+    run = toy_run(tmp_path, budget=100, seed=5)
+    representative = load_run(run).clusters[0].representative
+    page = write_report(run, recordings=0).read_text()
+    assert f"hritest shrink {run} --failure {representative.index}" in page  # not shrunk yet: how to
+    result = runner.invoke(app, ["shrink", str(run), "--failure", str(representative.index), "--json"])
+    assert result.exit_code == 0, result.output
+    needed = [name for name, row in json.loads(result.output)["parameters"].items() if row["matters"]]
+    page = write_report(run, recordings=0).read_text()
+    assert f"{', '.join(needed) or 'nothing: the nominal scenario fails too'} (" in page
