@@ -17,9 +17,8 @@ from hritest import repair
 from hritest.scenario import ScenarioSpace
 from hritest.spec.models import BoundsConstraint, InsideConstraint, MinSeparationConstraint, NoOverlapConstraint, Spec
 
-# CP-SAT's deterministic work limit per repair. Measured on the paper's collaboration instance:
-# the slowest case (three goals piled on one point) takes 1.2 s to *prove* optimal at 1.0, but its
-# best repair at 0.2 (0.3 s) already has the optimal cost; an unproven repair is still used.
+# CP-SAT's deterministic work limit per repair: enough for the optimal cost on the paper's hardest
+# collaboration case (docs/decisions.md); an unproven repair is still used.
 REPAIR_WORK_LIMIT = 0.2
 
 

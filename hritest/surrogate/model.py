@@ -1,30 +1,17 @@
 """The surrogate: trains the two networks on evaluated scenarios and predicts new ones in batches.
 
-Training follows the paper exactly: all data every outer iteration, weights (and optimiser
-state) kept between iterations, the occupancy network first (KL divergence to the observed
-grids), then the predictor for the same number of epochs with the occupancy network frozen and
-fed its *predicted* grids, so that at exploitation time it sees what it was trained on.
-Targets are the regularised objective divided by the objective's range, and the raw measures.
-A task that declares no grids has no occupancy network: the predictor alone learns the targets
-from theta, and a fit's ``occupancy_loss`` is NaN (no such loss, as for a fit of no epochs).
+Weights (and optimiser state) are kept between fits. A fit trains the occupancy network first
+(KL divergence to the observed grids), then the predictor for the same number of epochs with the
+occupancy network frozen and fed its *predicted* grids, so that at exploitation time it sees what
+it was trained on; on every sample (the paper's schedule) or on given rows (the incremental one,
+``search.surrogate.training``). Targets are the regularised objective divided by the objective's
+range, and the raw measures, each learned standardised over all samples and mapped back. A task
+that declares no grids has no occupancy network: the predictor alone learns the targets from
+theta, and a fit's ``occupancy_loss`` is NaN.
 
-Two departures from the reference, each the cause of a surrogate that was no better than a
-constant on the teleoperation spec (``benchmarks/README.md``, "Search quality"):
-
-* The predictor learns every target standardised (minus its mean, over its standard deviation,
-  on the current data) and its outputs are mapped back. The reference regressed the raw
-  measures, whose spreads (0.013 for the waypoint variation, against 0.25 for the normalised
-  objective) left them a negligible share of the MSE, and whose means the last layer, starting
-  at zero and moving about 1e-4 per AdamW step, had not reached after 100 epochs: trained the
-  paper's way on 500 random scenarios, its held-out error on the variation was 6.5x that of
-  predicting the mean; standardised, 0.7x.
-* theta is clipped into the parameter bounds before the networks see it. A ReLU network
-  extrapolates linearly, so outside the region it was trained on it predicts ever larger
-  objectives and new measure values, and the inner loop followed them: in the first outer
-  iteration on the teleoperation spec (100 samples) its proposals lay up to 6 m outside
-  16 cm-wide bounds, and the repair put them all on the bounds' corners. Clipped, the prediction
-  is flat outside the bounds, so only the penalty (which grows with the distance out) changes
-  there, and the inner search stays where the simulator's data is.
+The networks see theta clipped into the parameter bounds, so a prediction outside them is that of
+the nearest point inside. This and the standardised targets depart from the paper's reference
+code; ``docs/departures.md`` says why, with the measurements.
 """
 
 from __future__ import annotations
@@ -90,8 +77,8 @@ class Surrogate:
         # In eval mode except while fit() trains them: predictions never update batch-norm statistics.
         self.occupancy = OccupancyNet(inputs=inputs, channels=channels).to(device).eval() if channels else None
         self.predictor = PredictNet(inputs=inputs, channels=channels, outputs=outputs).to(device).eval()
-        # fused: one kernel over all parameters per step instead of a dozen small ops per tensor; the
-        # same update to float rounding, and ~1 ms less of each ~15-25 ms training step on 2 CPU cores.
+        # fused: one kernel over all parameters per step instead of a dozen small ops per tensor, the
+        # same update to float rounding (docs/decisions.md has the timing).
         self.occupancy_optimizer = (
             None
             if self.occupancy is None
