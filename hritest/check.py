@@ -14,11 +14,10 @@ from pathlib import Path
 import numpy as np
 
 from hritest import contract
-from hritest.domain import Domain, compile_spec
+from hritest.domain import Domain, load_domain
 from hritest.evaluate import evaluate_with_rollout
 from hritest.protocols import Rollout
 from hritest.records import Evaluation
-from hritest.spec import load_spec
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -88,7 +87,7 @@ def check_spec(path: Path, *, scenarios: int = 3, seed: int = 0) -> CheckReport:
     Raises:
         SpecError: the spec does not load or compile (the CLI prints it as the only finding).
     """
-    domain = compile_spec(load_spec(path))
+    domain = load_domain(path)
     checker = _Checker(domain=domain)
     checker.passed.append(
         f"spec compiles: theta has {domain.space.dim} components, task {domain.task_cls.__qualname__}, "

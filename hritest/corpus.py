@@ -369,15 +369,14 @@ def replay_entry(path: Path, *, tolerance: float = 1e-6) -> Replay:
         CorpusError: a malformed entry, a spec that is gone, or a theta of other labels.
         SpecError: its spec does not compile.
     """
-    from hritest.domain import compile_spec
+    from hritest.domain import load_domain
     from hritest.records import Status
     from hritest.replay import replay_outcome
-    from hritest.spec import load_spec
 
     entry = load_entry(path)
     if not entry.spec_path.is_file():
         raise CorpusError(f"{path}: field 'spec' names {entry.spec_path}, which no longer exists")
-    domain = compile_spec(load_spec(entry.spec_path))
+    domain = load_domain(entry.spec_path)
     if list(entry.theta) != domain.space.labels:
         raise CorpusError(
             f"{path}: field 'theta' has components {', '.join(entry.theta)}, but {entry.spec_name}'s theta is "

@@ -193,12 +193,11 @@ def replay_entry(
 
 
 def _compile(spec: str, domains: dict[str, Any]) -> dict[str, Any]:
-    from hritest.domain import compile_spec
+    from hritest.domain import load_domain
     from hritest.outcome_digest import outcome_digest
     from hritest.rundir import digest
-    from hritest.spec import load_spec
 
-    domains[spec] = domain = compile_spec(load_spec(spec))
+    domains[spec] = domain = load_domain(spec)
     outcome = outcome_digest(domain)
     return {"labels": list(domain.space.labels), "parts": dict(outcome.parts), "spec_digest": digest(Path(spec))}
 

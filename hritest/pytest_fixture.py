@@ -22,11 +22,10 @@ def _domain(config: pytest.Config, spec: Path) -> Any:
     """The compiled spec, once per spec per session (a spec that does not compile fails each of its tests)."""
     cache = config.stash.setdefault(_domains_key, {})
     if spec not in cache:
-        from hritest.domain import compile_spec
-        from hritest.spec import load_spec
+        from hritest.domain import load_domain
 
         try:
-            cache[spec] = compile_spec(load_spec(spec))
+            cache[spec] = load_domain(spec)
         except HritestError as exc:
             cache[spec] = exc
     found = cache[spec]

@@ -21,13 +21,12 @@ from typing import Any
 import numpy as np
 import yaml
 
-from hritest.domain import Domain, compile_spec
+from hritest.domain import Domain, load_domain
 from hritest.errors import HritestError
 from hritest.evaluate import evaluate_with_rollout
 from hritest.protocols import Rollout
 from hritest.records import Evaluation, EvaluationRecord, clauses_text, rank_failures, scenario_digest
 from hritest.rundir import RunDirectory
-from hritest.spec import load_spec
 
 TOLERANCE = 1e-6  # absolute, on the objective and on each measure
 
@@ -140,7 +139,7 @@ def run_domain(run: RunDirectory) -> Domain:
         RunDirectoryError: plugin files from outside the user's project in a run another user
             wrote (see :meth:`RunDirectory.plugin_base`).
     """
-    return compile_spec(load_spec(run.path / "spec.yaml"), base=run.plugin_base())
+    return load_domain(run.path / "spec.yaml", base=run.plugin_base())
 
 
 def failure_ids(run: RunDirectory, records: Sequence[EvaluationRecord]) -> list[int]:

@@ -127,10 +127,9 @@ JsonOption = Annotated[bool, typer.Option("--json", help="print JSON instead of 
 def domain_and_theta(spec: Path, theta: str):  # noqa: ANN201 - (Domain, np.ndarray): both imported lazily
     import numpy as np
 
-    from hritest.domain import compile_spec
-    from hritest.spec import load_spec
+    from hritest.domain import load_domain
 
-    domain = compile_spec(load_spec(spec))
+    domain = load_domain(spec)
     try:
         values = np.array([float(v) for v in theta.replace(" ", "").split(",")])
     except ValueError:

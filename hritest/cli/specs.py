@@ -93,10 +93,9 @@ def _duration(seconds: float) -> str:
 @command
 def show(spec: SpecArg) -> None:
     """Print the compiled scenario space (theta layout, bounds), archive, policies and failure condition."""
-    from hritest.domain import compile_spec
-    from hritest.spec import load_spec
+    from hritest.domain import load_domain
 
-    domain = compile_spec(load_spec(spec))
+    domain = load_domain(spec)
     s = domain.spec
     out.print(f"[bold]{s.name}[/bold]  {s.description}".rstrip(), highlight=False)
     out.print(

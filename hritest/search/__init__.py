@@ -12,7 +12,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from hritest.domain import compile_spec
+from hritest.domain import compile_spec, load_domain
 from hritest.errors import HritestError
 from hritest.rundir import RunDirectory, RunDirectoryError, digest
 from hritest.search.executor import DomainRef, Evaluator, local_pool
@@ -142,7 +142,7 @@ def resume(
                 f"Start a new run, or restore the spec (the run's copy is {run.path / 'spec.yaml'})"
             )
         base = run.plugin_base(trust=trust)
-        domain = compile_spec(load_spec(run.path / "spec.yaml"), base=base)
+        domain = load_domain(run.path / "spec.yaml", base=base)
         evaluator = backend.evaluator(DomainRef(spec=str(run.path / "spec.yaml"), base=run.meta["spec_base"]))
         try:
             search = Search.resume(domain=domain, run=run, trust=trust)

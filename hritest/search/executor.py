@@ -60,10 +60,9 @@ class EvaluationTimeout(BaseException):
 
 @cache
 def _domain(ref: DomainRef):  # noqa: ANN202 - a Domain
-    from hritest.domain import compile_spec
-    from hritest.spec import load_spec
+    from hritest.domain import load_domain
 
-    return compile_spec(load_spec(ref.spec), base=Path(ref.base))
+    return load_domain(ref.spec, base=Path(ref.base))
 
 
 def worker_init() -> None:
