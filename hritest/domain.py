@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import pydantic
 
-from hritest import contract, plugins
+from hritest import contract, plugin_loader
 from hritest.constraints import ScenarioRepair
 from hritest.errors import HritestError, PluginError, SpecError
 from hritest.protocols import TaskContext
@@ -218,7 +218,7 @@ def _resolve_plugins(refs: Mapping[str, str], *, base: Path | None, source: Sour
     issues = []
     for kind, ref in refs.items():
         try:
-            classes[kind] = plugins.resolve(ref, kind=kind, base=base)
+            classes[kind] = plugin_loader.resolve(ref, kind=kind, base=base)
         except PluginError as exc:
             issues.append(source.issue(PLUGIN_FIELDS[kind], str(exc)))
         else:

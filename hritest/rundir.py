@@ -278,7 +278,7 @@ class RunDirectory:
         Raises:
             RunDirectoryError: a plugin file outside the project; the message says what to do.
         """
-        from hritest.plugins import registered
+        from hritest.plugin_loader import registered
         from hritest.spec import load_spec
 
         base = self.meta.get("spec_base")

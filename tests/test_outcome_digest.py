@@ -59,7 +59,7 @@ def test_each_outcome_part_is_named_when_it_changes(toy_spec, tmp_path):
 
 def test_an_installed_plugin_package_is_digested_whole():
     from hritest.outcome_digest import _source
-    from hritest.plugins import resolve
+    from hritest.plugin_loader import resolve
 
     # hindsight assistance imports helpers from the package's other modules: all of them count
     cls = resolve("hindsight", kind="robot")
