@@ -37,7 +37,7 @@ def update_belief(
     Returns:
         The new normalised log belief (a new array).
     """
-    as_array = lambda v: np.asarray(v, dtype=np.float64)  # noqa: E731
+    as_array = lambda v: np.asarray(v, dtype=np.float64)  # noqa: E731 - a one-line local shorthand
     return _update_belief(as_array(log_belief), as_array(values), as_array(q_values), float(max_prob))
 
 

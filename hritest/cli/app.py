@@ -53,7 +53,7 @@ def command(fn):  # noqa: ANN001, ANN201 - a typer command
     """
 
     @functools.wraps(fn)
-    def run(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+    def run(*args: object, **kwargs: object) -> object:
         try:
             with stop_on_signals():
                 return fn(*args, **kwargs)

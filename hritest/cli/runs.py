@@ -178,7 +178,7 @@ class Progress:
         self.stop = threading.Event()
         self.ticker = threading.Thread(target=self._tick, daemon=True)
 
-    def __enter__(self):  # noqa: ANN204
+    def __enter__(self) -> Progress:
         if self.bar:
             self.bar.start()
         if self.plain:
@@ -415,7 +415,7 @@ def _print_replay(result) -> None:  # noqa: ANN001 - hritest.replay.Replay
     for column in ("compared", result.reference, "replayed", ""):
         table.add_column(column, justify="right" if column in (result.reference, "replayed") else "left")
 
-    def show(value) -> str:  # noqa: ANN001
+    def show(value: object) -> str:
         return f"{value:.10g}" if isinstance(value, float) else str(value)
 
     for check in result.checks:

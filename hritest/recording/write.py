@@ -130,7 +130,7 @@ def _blueprint(rollout: Any, scene: ReplayedScene | None):  # noqa: ANN202 - rer
     return rrb.Blueprint(rrb.Horizontal(view, rrb.Vertical(*side), column_shares=[3, 2]), collapse_panels=True)
 
 
-def _side_by_side(episodes: Sequence[Episode], scenes: Sequence[tuple[ReplayedScene | None, str]]):  # noqa: ANN202
+def _side_by_side(episodes: Sequence[Episode], scenes: Sequence[tuple[ReplayedScene | None, str]]):  # noqa: ANN202 - rerun.blueprint.Blueprint, imported lazily
     """Each episode's world side by side above one plot of every episode's series and one log."""
     import rerun.blueprint as rrb
 

@@ -21,7 +21,7 @@ class UniformEmitter(EmitterBase):
     pyribs has no such emitter; this keeps Random on the same ask/tell loop as the others.
     """
 
-    def __init__(self, archive, *, lower: np.ndarray, upper: np.ndarray, batch_size: int, seed: int) -> None:  # noqa: ANN001
+    def __init__(self, archive, *, lower: np.ndarray, upper: np.ndarray, batch_size: int, seed: int) -> None:  # noqa: ANN001 - a ribs archive
         super().__init__(archive, solution_dim=archive.solution_dim, bounds=None, lower_bounds=None, upper_bounds=None)
         self._lower, self._upper = np.asarray(lower), np.asarray(upper)
         self._batch_size = batch_size
@@ -52,7 +52,7 @@ def sigma0(domain: Domain) -> float:
     return float(np.exp(np.mean(np.log(widths[widths > 0])))) / 6 if np.any(widths > 0) else 1.0
 
 
-def scheduler(domain: Domain, algorithm: str, archive, *, seed: int) -> Scheduler:  # noqa: ANN001
+def scheduler(domain: Domain, algorithm: str, archive, *, seed: int) -> Scheduler:  # noqa: ANN001 - a ribs archive
     """The pyribs scheduler of a model-free ``algorithm`` over the search ``archive``."""
     search = domain.spec.search
     seeds = np.random.SeedSequence(seed).generate_state(search.emitter.emitters + 1)

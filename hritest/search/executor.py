@@ -96,7 +96,7 @@ def run_job(ref: DomainRef, job: Job, timeout: float) -> Evaluation:
             signal.signal(signal.SIGALRM, previous)
 
 
-def _raise_timeout(signum, frame) -> None:  # noqa: ANN001
+def _raise_timeout(signum, frame) -> None:  # noqa: ANN001 - a signal handler: (int, frame object)
     raise EvaluationTimeout
 
 

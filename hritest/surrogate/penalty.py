@@ -19,7 +19,7 @@ class Penalty:
 
     def __init__(self, terms: PenaltyTerms, device: torch.device) -> None:
         self.terms = terms
-        as_tensor = lambda a: torch.as_tensor(a, dtype=torch.float32, device=device)  # noqa: E731
+        as_tensor = lambda a: torch.as_tensor(a, dtype=torch.float32, device=device)  # noqa: E731 - a one-line local shorthand
         self.lower, self.upper = as_tensor(terms.lower), as_tensor(terms.upper)
         placed = np.all(terms.columns >= 0, axis=1)
         self.objects = torch.as_tensor(terms.columns[placed], device=device)
