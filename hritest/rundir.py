@@ -201,10 +201,15 @@ class RunDirectory:
             **meta,
         }
         meta["signature"] = _meta_signature(meta)  # before the folder: a key that fails leaves nothing
-        path.mkdir(parents=True, exist_ok=True)
-        atomic_write(path / "spec.yaml", spec)
-        atomic_write(path / RUN_FILE, json.dumps(meta, indent=2))
-        (path / LOCK_FILE).touch()
+        try:
+            path.mkdir(parents=True, exist_ok=True)
+            atomic_write(path / "spec.yaml", spec)
+            atomic_write(path / RUN_FILE, json.dumps(meta, indent=2))
+            (path / LOCK_FILE).touch()
+        except OSError as exc:
+            raise RunDirectoryError(
+                f"cannot write the run directory {path} ({exc.strerror or exc}); choose a writable place with --out"
+            ) from None
         return cls(path, meta)
 
     @classmethod

@@ -266,6 +266,10 @@ def test_bad_arguments_exit_2_and_write_nothing(toy_spec, tmp_path):
     result = runner.invoke(app, ["search", str(spec), "--out", str(tmp_path / "a-file")], env={"COLUMNS": "500"})
     assert result.exit_code == 2 and "is a file" in result.output
     assert (tmp_path / "a-file").read_text() == "mine"
+    result = runner.invoke(
+        app, ["search", str(spec), "--out", str(tmp_path / "a-file" / "run")], env={"COLUMNS": "500"}
+    )
+    assert result.exit_code == 2 and "cannot write the run directory" in result.output  # not a bug (exit 4)
     result = runner.invoke(app, ["search", str(spec), "--cluster", "tcp://127.0.0.1:1", "--out", str(tmp_path / "run")])
     assert result.exit_code == 2 and ("Dask" in result.output or "cannot reach" in result.output)
     assert not (tmp_path / "run").exists()
