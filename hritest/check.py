@@ -124,6 +124,13 @@ def check_spec(path: Path, *, scenarios: int = 3, seed: int = 0) -> CheckReport:
             f"{len(ok)} of {len(outcomes)} random scenarios ok; objectives "
             + ", ".join(f"{e.objective:.4g}" for e in ok)
         )
+    lo, hi = domain.spec.objective.range
+    outside = sorted({e.objective for e in [nominal, *ok] if e.ok and not lo <= e.objective <= hi})
+    if outside:
+        checker.notes.append(
+            f"objective {', '.join(f'{v:.4g}' for v in outside)} outside objective.range [{lo:g}, {hi:g}]: the "
+            "QD-score counts each elite's objective minus the range's low end, so widen the range to cover it"
+        )
     if rollout is not None:
         checker.notes += _recording_notes(rollout, domain)
     return CheckReport(

@@ -97,3 +97,10 @@ def test_findings_exit_2_and_a_spec_that_does_not_compile_too(toy_spec, tmp_path
     assert result.exit_code == 2 and "[metric_error] nominal scenario" in result.output
     result = runner.invoke(app, ["check", str(toy_spec("bind: task.g1x", "bind: task.g9x"))])
     assert result.exit_code == 2 and "does not compile" in result.output and "no parameter 'g9x'" in result.output
+
+
+def test_an_objective_outside_its_range_is_noted(toy_spec):
+    report = check_spec(toy_spec("range: [0, 10]", "range: [0, 1]"))
+    assert report.ok  # a note, not a finding: the search still works
+    assert any("outside objective.range [0, 1]" in note for note in report.notes)
+    assert not any("outside objective.range" in note for note in check_spec(toy_spec()).notes)
