@@ -141,11 +141,14 @@ def compile_spec(spec: Spec, *, base: Path | None = None) -> Domain:
     if issues:
         raise SpecError(issues, file=source.file)
 
-    nominal = {
-        "task": _plugin_params(classes["task"], spec.task.params, ("task", "params"), spec, source),
-        "robot": _plugin_params(classes["robot"], spec.robot.params, ("robot", "params"), spec, source),
-        "human": _plugin_params(classes["human"], spec.human.params, ("human", "params"), spec, source),
-    }
+    nominal, issues = {}, []
+    for kind, given in (("task", spec.task.params), ("robot", spec.robot.params), ("human", spec.human.params)):
+        try:  # each plugin's params on their own: what all three reject is reported at once
+            nominal[kind] = _plugin_params(classes[kind], given, (kind, "params"), spec, source)
+        except SpecError as exc:
+            issues += exc.issues
+    if issues:
+        raise SpecError(issues, file=source.file)
     found = check_references(spec, metrics=getattr(classes["task"], "metrics", ()))
     if found:
         raise SpecError([source.issue(path, message) for path, message in found], file=source.file)

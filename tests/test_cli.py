@@ -37,6 +37,14 @@ def test_validate_ok_and_bad(toy_spec, tmp_path):
     assert f"{bad}:" in result.output and "measures[0].cells" in result.output
 
 
+def test_validate_names_every_invalid_plugin_param_in_one_run(toy_spec):
+    spec = toy_spec("  time_limit: 10.0\n", "  time_limit: 10.0\n  params: {scale: .nan, fault_above: .inf}\n")
+    result = runner.invoke(app, ["validate", str(spec)])
+    assert result.exit_code == 2, result.output
+    assert "task.params.scale: expected a finite number, not nan" in result.output
+    assert "task.params.fault_above: expected a finite number, not inf" in result.output
+
+
 def test_show_prints_the_layout(toy_spec):
     result = runner.invoke(app, ["show", str(toy_spec())])
     assert result.exit_code == 0, result.output

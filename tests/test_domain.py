@@ -195,3 +195,16 @@ def test_load_domain_reports_plugins_beside_schema_errors(toy_spec):
     with pytest.raises(SpecError) as info:
         load_domain(path)
     assert [issue.field for issue in info.value.issues] == ["measures[0].cells", "human.policy"]
+
+
+def test_params_every_plugin_rejects_are_reported_at_once(toy_spec):
+    path = toy_spec("  time_limit: 10.0\n", "  time_limit: 10.0\n  params: {scale: fast, delay: never}\n")
+    path.write_text(
+        path.read_text().replace(
+            "policy: toy_plugins.py:ToyHuman\n", "policy: toy_plugins.py:ToyHuman\n  params: {speed: slow}\n"
+        )
+    )
+    with pytest.raises(SpecError) as info:
+        load_domain(path)
+    fields = [issue.field for issue in info.value.issues]
+    assert fields == ["task.params.scale", "task.params.delay", "human.params.speed"], str(info.value)

@@ -17,6 +17,7 @@ from pydantic import (
     Field,
     PrivateAttr,
     StringConstraints,
+    ValidationError,
     ValidationInfo,
     field_validator,
     model_validator,
@@ -69,17 +70,22 @@ BatchSize = Annotated[int, Field(gt=0, le=MAX_BATCH, strict=True)]
 
 
 def _finite_params(params: dict[str, Any]) -> dict[str, Any]:
-    """A plugin's params hold any YAML, but no NaN or infinity: a plugin's model may well accept them."""
-    stack = [([key], value) for key, value in params.items()]
+    """A plugin's params hold any YAML, but no NaN or infinity: a plugin's model may well accept them.
+
+    Every such value is reported, each at its own place (a ValidationError raised here keeps its
+    locations, below the params' own), so that one ``validate`` names them all.
+    """
+    errors, stack = [], [((key,), value) for key, value in reversed(params.items())]
     while stack:
         path, value = stack.pop()
         if isinstance(value, float) and not math.isfinite(value):
-            where = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in path).lstrip(".")
-            raise ValueError(f"{where} is {value}; write a finite number (not .nan or .inf)")
-        if isinstance(value, dict):
-            stack += [([*path, key], item) for key, item in value.items()]
+            errors.append({"type": "finite_number", "loc": path, "input": value})
+        elif isinstance(value, dict):
+            stack += [((*path, key), item) for key, item in reversed(value.items())]
         elif isinstance(value, list):
-            stack += [([*path, i], item) for i, item in enumerate(value)]
+            stack += [((*path, i), item) for i, item in reversed(list(enumerate(value)))]
+    if errors:
+        raise ValidationError.from_exception_data("params", errors)
     return params
 
 

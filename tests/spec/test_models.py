@@ -132,15 +132,29 @@ def test_sizes_no_episode_or_search_can_hold(toy_spec, old, new, field, words):
 @pytest.mark.parametrize(
     ("old", "new", "field", "words"),
     [
-        ("time_limit: 10.0\n", "time_limit: 10.0\n  params: {scale: .nan}\n", "task.params", "scale is nan"),
+        ("time_limit: 10.0\n", "time_limit: 10.0\n  params: {scale: .nan}\n", "task.params.scale", "not nan"),
         (
             "policy: toy_plugins.py:ToyHuman\n",
             "policy: toy_plugins.py:ToyHuman\n  params: {speed: 1, gains: {p: [1, -.inf]}}\n",
-            "human.params",
-            "gains.p[1] is -inf",
+            "human.params.gains.p[1]",
+            "not -inf",
         ),
     ],
 )
 def test_plugin_params_are_finite(toy_spec, old, new, field, words):
     issue = only_issue(toy_spec(old, new))
-    assert issue.field == field and words in issue.message, issue.message
+    assert issue.field == field and f"expected a finite number, {words}" in issue.message, issue.message
+
+
+def test_every_non_finite_plugin_param_is_named_at_its_own_line(toy_spec):
+    path = toy_spec(
+        "policy: toy_plugins.py:ToyHuman\n",
+        "policy: toy_plugins.py:ToyHuman\n  params:\n    speed: .nan\n    gains: [1, .inf]\n",
+    )
+    with pytest.raises(SpecError) as info:
+        load_spec(path)
+    lines = path.read_text().splitlines()
+    found = {issue.field: issue for issue in info.value.issues}
+    assert sorted(found) == ["human.params.gains[1]", "human.params.speed"], str(info.value)
+    assert lines[found["human.params.speed"].location.line - 1].strip() == "speed: .nan"
+    assert lines[found["human.params.gains[1]"].location.line - 1].strip() == "gains: [1, .inf]"
