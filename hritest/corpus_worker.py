@@ -26,7 +26,7 @@ from typing import Any
 
 from hritest.corpus import Entry
 
-COMPILE_SECONDS = 300.0  # worker start-up and compiling a spec (plugin imports, first numba compile)
+COMPILE_SECONDS = 300.0  # default: worker start-up and compiling a spec (plugin imports, first numba compile)
 SEED_SECONDS = 30.0  # added to five times an entry's recorded seconds, per replayed seed
 UNKNOWN_SECONDS = 60.0  # per seed, for an entry that did not record how long it took (format 1)
 
@@ -64,11 +64,12 @@ class ReplayWorker:
         self.compiled: dict[str, dict[str, Any]] = {}
         self.loaded: set[str] = set()  # the specs the current worker process has compiled
 
-    def request(self, message: dict[str, Any], *, timeout: float) -> dict[str, Any]:
-        """Sends ``message`` and returns the answer.
+    def request(self, message: dict[str, Any], *, timeout: float, option: str) -> dict[str, Any]:
+        """Sends ``message`` and returns the answer; ``option`` is the pytest option that sets ``timeout``.
 
         Raises:
-            WorkerError: no answer within ``timeout`` seconds (the worker is killed), or the worker died.
+            WorkerError: no answer within ``timeout`` seconds (the worker is killed; the message names
+                ``option``), or the worker died.
         """
         if self.process is None:
             self._start()
@@ -83,7 +84,7 @@ class ReplayWorker:
         if line is None:
             self.close()
             raise WorkerError(
-                f"did not finish within {timeout:g} s: a plugin that hangs? (raise the limit with --hri-timeout)"
+                f"did not finish within {timeout:g} s: a plugin that hangs? (raise the limit with {option})"
             )
         if not line:
             code = self.process.wait()
@@ -144,12 +145,21 @@ class ReplayWorker:
 
 
 def replay_entry(
-    entry: Entry, *, worker: ReplayWorker, replays: int = 1, timeout: float | None = None, project: Path | None
+    entry: Entry,
+    *,
+    worker: ReplayWorker,
+    replays: int = 1,
+    timeout: float | None = None,
+    compile_timeout: float = COMPILE_SECONDS,
+    project: Path | None,
 ) -> Any:
     """Replays ``entry`` with ``replays`` seeds (:func:`replay_seeds`) in ``worker`` and judges it.
 
-    ``timeout`` limits each seed's replay (default :func:`seed_timeout`). ``project`` is the folder the
-    entry's spec must lie in, since compiling it runs the plugins it names (None: anywhere).
+    ``timeout`` limits each seed's replay (default :func:`seed_timeout`); ``compile_timeout`` the
+    worker's start and the compiling of the entry's spec, once per spec (a project whose plugins
+    import slowly, or a cold numba cache on a slow CI machine, may need more than the default).
+    ``project`` is the folder the entry's spec must lie in, since compiling it runs the plugins it
+    names (None: anywhere).
     Returns a :class:`hritest.verdict.Judgement`; nothing about the entry raises.
     """
     from hritest import verdict
@@ -165,7 +175,9 @@ def replay_entry(
     key = str(spec)
     if key not in worker.compiled or ("error" not in worker.compiled[key] and key not in worker.loaded):
         try:
-            worker.compiled[key] = worker.request({"compile": key}, timeout=COMPILE_SECONDS)
+            worker.compiled[key] = worker.request(
+                {"compile": key}, timeout=compile_timeout, option="--hri-compile-timeout"
+            )
             worker.loaded.add(key)
         except WorkerError as exc:  # kept, so that the spec's other entries do not wait as long again
             worker.compiled[key] = {"error": f"compiling its spec: {exc}"}
@@ -181,7 +193,9 @@ def replay_entry(
         changes = verdict.changes_since(entry, parts_now=compiled["parts"], spec_digest_now=compiled["spec_digest"])
         seeds = replay_seeds(entry, replays)
         limit = (timeout if timeout is not None else seed_timeout(entry)) * len(seeds)
-        answer = worker.request({"replay": key, "theta": list(entry.theta.values()), "seeds": seeds}, timeout=limit)
+        answer = worker.request(
+            {"replay": key, "theta": list(entry.theta.values()), "seeds": seeds}, timeout=limit, option="--hri-timeout"
+        )
     except WorkerError as exc:
         return verdict.error(str(exc))
     if "error" in answer:

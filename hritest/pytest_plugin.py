@@ -48,6 +48,8 @@ _worker_key = pytest.StashKey[Any]()
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
+    from hritest.corpus_worker import COMPILE_SECONDS  # which imports only what this module does
+
     group = parser.getgroup("hritest", "hritest failure corpus")
     group.addoption(
         "--hri-corpus",
@@ -86,6 +88,15 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         "an entry that takes longer fails",
     )
     group.addoption(
+        "--hri-compile-timeout",
+        metavar="S",
+        type=float,
+        default=COMPILE_SECONDS,
+        help=f"the time limit in seconds of compiling an entry's spec, once per spec, in the replay process "
+        f"(default: {COMPILE_SECONDS:g}: plugin imports and a first numba compile); the entries of a spec "
+        "that takes longer fail",
+    )
+    group.addoption(
         "--hri-allow-outside",
         action="store_true",
         default=False,
@@ -106,11 +117,14 @@ def pytest_configure(config: pytest.Config) -> None:
         "markers", "hri: a hritest scenario test (a failure corpus entry or a test using the hri_scenario fixture)"
     )
     given = config.getoption("hri_corpus", None)
-    replays, timeout = config.getoption("hri_replays", 1), config.getoption("hri_timeout", None)
+    replays = config.getoption("hri_replays", 1)
     if replays < 1:
         raise pytest.UsageError(f"--hri-replays must be 1 or more, got {replays}")
-    if timeout is not None and not 0 < timeout < float("inf"):
-        raise pytest.UsageError(f"--hri-timeout must be a positive number of seconds, got {timeout}")
+    for option in ("hri_timeout", "hri_compile_timeout"):
+        timeout = config.getoption(option, None)
+        if timeout is not None and not 0 < timeout < float("inf"):
+            name = "--" + option.replace("_", "-")
+            raise pytest.UsageError(f"{name} must be a positive number of seconds, got {timeout}")
     try:
         corpus = (config.rootpath / given) if given else hc.default_corpus(config.rootpath)
     except hc.CorpusError as exc:
@@ -218,6 +232,7 @@ class CorpusItem(pytest.Item):
             worker=_worker(config),
             replays=config.getoption("hri_replays"),
             timeout=config.getoption("hri_timeout"),
+            compile_timeout=config.getoption("hri_compile_timeout"),
             project=None if config.getoption("hri_allow_outside") else config.rootpath,
         )
         verdict, changed = judged.verdict, (f" {judged.changed}" if judged.changes else "")

@@ -343,6 +343,23 @@ def test_a_plugin_that_hangs_or_kills_its_process_fails_the_entry(project, fault
     assert load_entry(fine).status == "fixed"
 
 
+def test_a_spec_that_compiles_past_the_compile_timeout_fails_its_entries_naming_the_option(project):
+    entry = project.record(FAILS_WHEN_FIXED[0], status="open")
+    plugins = project.specs / "toy_plugins.py"
+    plugins.write_text(plugins.read_text() + "\ntime.sleep(60)  # a plugin module that imports slowly\n")
+    result = project.pytester.runpytest("--hri-compile-timeout", "2")
+    result.assert_outcomes(failed=1)
+    result.stdout.fnmatch_lines(
+        [
+            f"hritest {entry_id(entry)} cannot be replayed: compiling its spec: did not finish within 2 s*"
+            "(raise the limit with --hri-compile-timeout)*"
+        ]
+    )
+    usage = project.pytester.runpytest("--hri-compile-timeout", "0")
+    assert usage.ret == pytest.ExitCode.USAGE_ERROR
+    usage.stderr.fnmatch_lines(["*--hri-compile-timeout must be a positive number of seconds, got 0.0*"])
+
+
 def test_replays_with_several_seeds_report_an_entry_that_fails_sometimes_as_flaky(project):
     plugins = project.specs / "toy_plugins.py"
     text = plugins.read_text()
