@@ -132,14 +132,14 @@ def _finite(value: float) -> float | None:
 # --- run directories ---------------------------------------------------------------------------
 
 
-def run_domain(run: RunDirectory) -> Domain:
+def run_domain(run: RunDirectory, *, trust: bool = False) -> Domain:
     """The run's own copy of its spec, compiled with plugin paths relative to the original spec.
 
     Raises:
         RunDirectoryError: plugin files from outside the user's project in a run another user
-            wrote (see :meth:`RunDirectory.plugin_base`).
+            wrote, unless the caller trusts the run (see :meth:`RunDirectory.plugin_base`).
     """
-    return load_domain(run.path / "spec.yaml", base=run.plugin_base())
+    return load_domain(run.path / "spec.yaml", base=run.plugin_base(trust=trust))
 
 
 def failure_ids(run: RunDirectory, records: Sequence[EvaluationRecord]) -> list[int]:

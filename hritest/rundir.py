@@ -301,7 +301,7 @@ class RunDirectory:
                     f"spec names the plugin file {path}, which lies outside your project ({project}, the folder "
                     "you run hritest in, less the run directory): importing it would run code that came with "
                     "the run. Run hritest from the project that holds the file, or, if you trust whoever "
-                    "wrote this run, resume it with --trust"
+                    "wrote this run, give --trust (hritest search --resume, report and replay take it)"
                 )
         return Path(base) if base else None
 
@@ -434,7 +434,7 @@ class RunDirectory:
             raise RunDirectoryError(
                 f"{path} was not loaded: {why}. Loading a checkpoint runs whatever code it holds, so hritest "
                 f"loads only those signed with your key ({key_path()}). Start a new search; or, if you trust "
-                f"whoever wrote this run, resume it with 'hritest search --resume {self.path} --trust'"
+                "whoever wrote this run, give --trust (hritest search --resume and hritest report take it)"
             )
         try:
             return pickle.loads(data)

@@ -102,6 +102,28 @@ def test_a_corpus_entry_replays_against_what_it_recorded(run, tmp_path, monkeypa
     assert runner.invoke(app, ["replay", str(entry), "--failure", "1"]).exit_code == 2
 
 
+def test_a_run_someone_else_wrote_replays_only_with_trust(run, tmp_path, monkeypatch):
+    fid = first_failure(run)
+    copy = tmp_path / "theirs"
+    shutil.copytree(run, copy)
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "another-user"))  # its signature is not ours
+    (tmp_path / "elsewhere").mkdir()
+    monkeypatch.chdir(tmp_path / "elsewhere")  # and the plugin file its spec names lies outside our project
+    result = runner.invoke(app, ["replay", str(copy), "--failure", str(fid)])
+    assert result.exit_code == 2, result.output
+    message = " ".join(result.output.split())
+    assert "not started by you" in message and "--trust" in message, message
+
+    result = runner.invoke(app, ["replay", str(copy), "--failure", str(fid), "--trust"])
+    assert result.exit_code == 0, result.output
+    assert "replay matches" in result.output
+
+    result = runner.invoke(
+        app, ["replay", str(run.parent / "toy.yaml"), "--theta", "0.6,0.05,0.6,0.05,0,0,0", "--trust"]
+    )
+    assert result.exit_code == 2 and "--trust" in result.output, result.output
+
+
 def test_compare_is_exact_on_verdicts_and_tolerant_on_numbers():
     stored = {"status": "ok", "failure": True, "objective": 10.0, "measures": [0.1, None]}
     same = {"status": "ok", "failure": True, "objective": 10.0 + 0.5 * TOLERANCE, "measures": [0.1, None]}

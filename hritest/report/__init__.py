@@ -36,7 +36,7 @@ __all__ = [
 ]
 
 
-def write_report(run_path: Path, *, recordings: int = RECORDINGS, out: Path | None = None) -> Path:
+def write_report(run_path: Path, *, recordings: int = RECORDINGS, out: Path | None = None, trust: bool = False) -> Path:
     """Writes the report of a run directory; returns the path of its ``index.html``.
 
     Args:
@@ -45,12 +45,15 @@ def write_report(run_path: Path, *, recordings: int = RECORDINGS, out: Path | No
             each kind's representative, and look for the first kind's counterfactual (0: record
             and search nothing, but show what earlier reports left).
         out: the report folder (default ``<run>/report``).
+        trust: load the run's checkpoint and plugin files though another user wrote them
+            (see :mod:`hritest.rundir`); the run is not signed as this user's.
 
     Raises:
-        RunDirectoryError, EmptyRunError: not a readable run, or one with no evaluations.
+        RunDirectoryError, EmptyRunError: not a readable run, one with no evaluations, or one
+            another user wrote (unless ``trust``).
         RecordingError: the recordings folder cannot be written.
     """
-    data = load_run(run_path)
+    data = load_run(run_path, trust=trust)
     out = Path(out) if out is not None else data.path / "report"
     out.mkdir(parents=True, exist_ok=True)
     recorded = record_failures(data, chosen_failures(data.failures, data.clusters, recordings))
@@ -64,13 +67,14 @@ def write_report(run_path: Path, *, recordings: int = RECORDINGS, out: Path | No
     return out / "index.html"
 
 
-def compare_runs(run_paths: Sequence[Path], out: Path) -> Path:
-    """One page that puts several runs on the same curves and their archives side by side.
+def compare_runs(run_paths: Sequence[Path], out: Path, *, trust: bool = False) -> Path:
+    """One page that puts several runs on the same curves and their archives side by side
+    (``trust``: as :func:`write_report`).
 
     Raises:
         RunDirectoryError, EmptyRunError: any run that is not readable or has no evaluations.
     """
-    runs = [load_run(p) for p in run_paths]
+    runs = [load_run(p, trust=trust) for p in run_paths]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     _write(compare_document(runs, link_base=out), out)

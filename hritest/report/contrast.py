@@ -10,7 +10,7 @@ from typing import Any
 
 from hritest.records import EvaluationRecord
 from hritest.report.run import RunData
-from hritest.rundir import RunDirectory, atomic_write
+from hritest.rundir import atomic_write
 
 BUDGET = 40  # simulations the report spends looking for a failure's counterfactual
 
@@ -34,7 +34,6 @@ def contrast(data: RunData, failure: EvaluationRecord, *, search: bool = True, b
     searched now (unless not ``search``)."""
     from hritest.counterfactual import CounterfactualError, counterfactual
     from hritest.records import scenario_digest
-    from hritest.replay import run_domain
 
     path = data.path / "counterfactuals" / f"{failure.index}.json"
     digest = scenario_digest(data.meta["spec_digest"], failure.theta_repaired, failure.seed)
@@ -45,7 +44,7 @@ def contrast(data: RunData, failure: EvaluationRecord, *, search: bool = True, b
     if stored.get("digest") != digest and not search:
         return Contrast(failure=failure, passing=None, reason="not searched for this report (--recordings 0)")
     if stored.get("digest") != digest:
-        domain = run_domain(RunDirectory.open(data.path))
+        domain = data.domain()
         try:
             found = counterfactual(domain, failure.theta, seed=failure.seed, budget=budget)
         except CounterfactualError as exc:

@@ -10,7 +10,7 @@ from typing import Any
 
 from hritest.records import EvaluationRecord
 from hritest.report.run import RunData
-from hritest.rundir import RunDirectory, atomic_write
+from hritest.rundir import atomic_write
 
 
 @dataclass(frozen=True)
@@ -34,7 +34,7 @@ def record_failures(data: RunData, failures: Sequence[EvaluationRecord]) -> dict
     an earlier one): recordings are made once per scenario."""
     from hritest.recording import check_writable, write_recording
     from hritest.records import scenario_digest
-    from hritest.replay import replay_record, run_domain
+    from hritest.replay import replay_record
 
     if not failures:
         return {}
@@ -49,7 +49,7 @@ def record_failures(data: RunData, failures: Sequence[EvaluationRecord]) -> dict
         if path.is_file() and entry.get("digest") == digest:
             done[record.index] = Recorded(path, entry.get("matches"), tuple(entry.get("differs", ())))
             continue
-        domain = domain or run_domain(RunDirectory.open(data.path))
+        domain = domain or data.domain()
         replay = replay_record(domain, record, spec_digest=data.meta["spec_digest"])
         write_recording(
             path,

@@ -28,6 +28,18 @@ class RunData:
     clusters: Sequence[Cluster]  # the kinds of failure, largest first
     surrogate: Mapping[str, Any] | None
     shrunk: Mapping[int, Mapping[str, Any]] = field(default_factory=dict)  # RUN/shrunk/ID.json, by id
+    trust: bool = False  # the user vouches for the run: its plugin files load though another user wrote it
+
+    def domain(self) -> Any:  # hritest.domain.Domain
+        """The run's spec compiled, to re-simulate its scenarios (see :func:`hritest.replay.run_domain`).
+
+        Raises:
+            RunDirectoryError: plugin files from outside the user's project in a run another user
+                wrote, unless ``trust``.
+        """
+        from hritest.replay import run_domain
+
+        return run_domain(RunDirectory.open(self.path), trust=self.trust)
 
     @property
     def name(self) -> str:
@@ -53,11 +65,13 @@ class RunData:
 # --- reading ---------------------------------------------------------------------------------
 
 
-def load_run(path: Path) -> RunData:
-    """Reads a run directory.
+def load_run(path: Path, *, trust: bool = False) -> RunData:
+    """Reads a run directory; ``trust`` loads its checkpoint and plugin files though another user
+    wrote them (see :mod:`hritest.rundir`).
 
     Raises:
-        RunDirectoryError: not a run directory, or a corrupt one.
+        RunDirectoryError: not a run directory, a corrupt one, or a checkpoint this user did not
+            write (unless ``trust``).
         EmptyRunError: no finished evaluation yet.
     """
     from hritest.replay import EmptyRunError, failure_ids
@@ -72,7 +86,7 @@ def load_run(path: Path) -> RunData:
         )
     spec = load_spec(run.path / "spec.yaml")
     by_index = {r.index: r for r in records}
-    elite_ids = _elite_ids(run)
+    elite_ids = _elite_ids(run, trust=trust)
     surrogate = run.path / "surrogate.json"
     failures = [by_index[i] for i in failure_ids(run, records) if i in by_index]
     clusters = cluster_failures(
@@ -92,6 +106,7 @@ def load_run(path: Path) -> RunData:
         clusters=clusters,
         surrogate=json.loads(surrogate.read_text()) if surrogate.is_file() else None,
         shrunk=_shrunk(run.path / "shrunk"),
+        trust=trust,
     )
 
 
@@ -113,7 +128,7 @@ def _read_progress(path: Path) -> list[dict[str, float]]:
         return [{k: float(v) for k, v in row.items() if v not in ("", None)} for row in csv.DictReader(handle)]
 
 
-def _elite_ids(run: RunDirectory) -> list[int]:
+def _elite_ids(run: RunDirectory, *, trust: bool) -> list[int]:
     """The result archive's elites: ``archive.csv``, else the checkpoint's result archive."""
     path = run.path / "archive.csv"
     if path.is_file():
@@ -121,5 +136,5 @@ def _elite_ids(run: RunDirectory) -> list[int]:
             return [int(row["evaluation"]) for row in csv.DictReader(handle)]
     from hritest.search.state import load_state
 
-    state = load_state(run)  # verified as this user's before it is unpickled
+    state = load_state(run, trust=trust)  # verified as this user's before it is unpickled, unless trusted
     return [] if state is None else [int(i) for i in state.result.data("evaluation")]

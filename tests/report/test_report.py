@@ -289,3 +289,29 @@ def test_a_kinds_representative_shows_what_its_shrunk_version_needs(tmp_path):
     needed = [name for name, row in json.loads(result.output)["parameters"].items() if row["matters"]]
     page = write_report(run, recordings=0).read_text()
     assert f"{', '.join(needed) or 'nothing: the nominal scenario fails too'} (" in page
+
+
+def test_a_run_someone_else_wrote_is_reported_only_with_trust(tmp_path, monkeypatch):
+    run = toy_run(tmp_path / "theirs", budget=60)
+    (run / "archive.csv").unlink()  # so that the report reads the checkpoint's result archive
+    shutil.rmtree(run / "recordings", ignore_errors=True)
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "another-user"))  # their signature is not ours
+    (tmp_path / "elsewhere").mkdir()
+    monkeypatch.chdir(tmp_path / "elsewhere")  # and their plugin file lies outside our project
+    for args in (["--recordings", "0"], []):
+        result = runner.invoke(app, ["report", str(run), *args])
+        assert result.exit_code == 2, result.output
+        message = " ".join(result.output.split())
+        assert "checkpoint.pkl was not loaded" in message and "--trust" in message, message
+    (run / "archive.csv").write_text("evaluation\n")  # the archive is there again: now the plugins are refused
+    result = runner.invoke(app, ["report", str(run)])
+    assert result.exit_code == 2, result.output
+    message = " ".join(result.output.split())
+    assert "not started by you" in message and "--trust" in message, message
+    assert not any((run / "recordings").glob("*.rrd"))
+
+    (run / "archive.csv").unlink()
+    result = runner.invoke(app, ["report", str(run), "--trust"])
+    assert result.exit_code == 0, result.output
+    assert (run / "report" / "index.html").is_file() and any((run / "recordings").glob("*.rrd"))
+    assert not RunDirectory.open(run).written_by_me  # reporting a run does not make it the user's
