@@ -33,7 +33,7 @@ from hritest.spec import load_spec
 def final_row(run: Path) -> dict[str, float]:
     with open(run / "progress.csv") as handle:
         rows = list(csv.DictReader(handle))
-    return {k: float(v) for k, v in rows[-1].items()}
+    return {k: float(v) for k, v in rows[-1].items() if k != "proposer"}
 
 
 def finished(run: Path, evaluations: int) -> bool:

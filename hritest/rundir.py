@@ -40,6 +40,7 @@ import hmac
 import io
 import json
 import lzma
+import math
 import os
 import pickle
 import platform
@@ -237,6 +238,11 @@ class RunDirectory:
                 raise RunDirectoryError(
                     f"{path / RUN_FILE}: {name} is {meta[name]!r}, not a {kind.__name__}; the file is corrupt"
                 )
+        limit = meta.get("time_limit")
+        if limit is not None and not (isinstance(limit, int | float) and 0 < limit < math.inf):
+            raise RunDirectoryError(
+                f"{path / RUN_FILE}: time_limit is {limit!r}, not a number of seconds; the file is corrupt"
+            )
         return cls(path, meta)
 
     # --- provenance and the one writer -------------------------------------------------------
@@ -247,11 +253,16 @@ class RunDirectory:
         signature = self.meta.get("signature")
         return isinstance(signature, str) and hmac.compare_digest(signature, _meta_signature(self.meta))
 
+    def update_meta(self, **changes: Any) -> None:
+        """Sets fields of ``run.json`` and signs it again: for the run's one writer, under its lock."""
+        meta = {**self.meta, **changes}
+        self.meta = {**meta, "signature": _meta_signature(meta)}
+        atomic_write(self.path / RUN_FILE, json.dumps(self.meta, indent=2))
+
     def adopt(self) -> None:
         """Signs ``run.json`` and the checkpoint with this user's key, unread: the user vouches for
         a run written by someone else, or by themselves on another machine (a packed run)."""
-        self.meta = {**self.meta, "signature": _meta_signature(self.meta)}
-        atomic_write(self.path / RUN_FILE, json.dumps(self.meta, indent=2))
+        self.update_meta()
         path = self.path / "checkpoint.pkl"
         if path.exists():
             raw = path.read_bytes()

@@ -146,6 +146,27 @@ def domain_and_theta(spec: Path, theta: str):  # noqa: ANN201 - (Domain, np.ndar
     return domain, values
 
 
+_UNITS = {"": 1, "s": 1, "m": 60, "h": 3600}
+
+
+def duration(text: str) -> float:
+    """Seconds in ``90``, ``90s``, ``15m``, ``2h`` or ``1.5h``: what ``--time-limit`` takes."""
+    import math
+
+    number, unit = text.strip().lower(), ""
+    if number[-1:] in _UNITS:
+        number, unit = number[:-1], number[-1]
+    try:
+        seconds = float(number) * _UNITS[unit]
+    except ValueError:
+        seconds = math.nan
+    if not 0 < seconds < math.inf:
+        raise typer.BadParameter(
+            f"{text!r} is not a duration above zero; write seconds (90 or 90s), minutes (15m) or hours (2h)"
+        )
+    return seconds
+
+
 def print_json(data: dict) -> None:
     import json
 

@@ -18,6 +18,7 @@ from hritest.cli.app import (
     JsonOption,
     command,
     domain_and_theta,
+    duration,
     err,
     out,
     print_json,
@@ -36,10 +37,30 @@ def search(
     ] = None,
     algorithm: Annotated[
         str | None,
-        typer.Option(help="random, map_elites, cma_mae, sas, dsas (default: the spec's)", rich_help_panel="Search"),
+        typer.Option(
+            help="random, map_elites, cma_mae, sas, dsas, or auto: whichever finds the most per second "
+            "(default: the spec's)",
+            rich_help_panel="Search",
+        ),
     ] = None,
     budget: Annotated[
-        int | None, typer.Option(min=1, help="real evaluations (default: the spec's)", rich_help_panel="Search")
+        int | None,
+        typer.Option(
+            min=1,
+            help="real evaluations (default: the spec's, unless --time-limit is given alone)",
+            rich_help_panel="Search",
+        ),
+    ] = None,
+    time_limit: Annotated[
+        float | None,
+        typer.Option(
+            parser=duration,
+            metavar="DURATION",
+            help="stop the search after this long (90, 90s, 15m, 2h), or at --budget if that comes first; "
+            "with --resume: run this much longer (default: the run's own limit again)",
+            rich_help_panel="Search",
+            show_default=False,
+        ),
     ] = None,
     seed: Annotated[
         int | None, typer.Option(min=0, max=MAX_SEED, help="default: the spec's", rich_help_panel="Search")
@@ -114,13 +135,14 @@ def search(
     backend = qd.Backend(workers=workers, cluster=cluster, timeout=timeout)
     with Progress(quiet) as progress:
         if resume is not None:
-            found = qd.resume(run_path=resume, backend=backend, progress=progress, trust=trust)
+            found = qd.resume(run_path=resume, time_limit=time_limit, backend=backend, progress=progress, trust=trust)
         else:
             found = qd.start(
                 spec_file=spec,
                 out=out_dir,
                 algorithm=algorithm,
                 budget=budget,
+                time_limit=time_limit,
                 seed=seed,
                 backend=backend,
                 progress=progress,
@@ -148,12 +170,17 @@ def search(
 class Progress:
     """Search progress on stderr: a bar that fits the terminal on one; without one (a CI log), a
     plain line when the search starts, every ``PLAIN_SECONDS`` while it runs (whatever it is
-    doing, a long surrogate training included) and when it ends; nothing with ``quiet``."""
+    doing, a long surrogate training included) and when it ends; nothing with ``quiet``.
+
+    Both say what the search is doing (its phase and, for ``auto``, which algorithm proposes),
+    evaluations per second, and the time left: to the time limit, or to the end of the budget at
+    the rate so far, whichever comes first. Without a budget, the bar measures time.
+    """
 
     PLAIN_SECONDS = 5.0
 
     def __init__(self, quiet: bool) -> None:
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+        from rich.progress import BarColumn, Progress, TextColumn
         from rich.table import Column
 
         self.plain = not quiet and not err.is_terminal
@@ -164,9 +191,9 @@ class Progress:
                 # One line at any width: the bar and the numbers share what the counts leave.
                 TextColumn("[bold]search", table_column=Column(no_wrap=True)),
                 BarColumn(bar_width=None, table_column=Column(ratio=1, min_width=5)),
-                MofNCompleteColumn(table_column=Column(no_wrap=True)),
+                TextColumn("{task.fields[count]}", table_column=Column(no_wrap=True)),
                 TextColumn("{task.fields[stats]}", table_column=Column(ratio=3, no_wrap=True, overflow="ellipsis")),
-                TimeRemainingColumn(table_column=Column(no_wrap=True)),
+                TextColumn("{task.fields[left]}", table_column=Column(no_wrap=True)),
                 console=err,
                 transient=True,
                 expand=True,
@@ -204,8 +231,14 @@ class Progress:
         if self.bar is None:
             return
         if self.task is None:
-            self.task = self.bar.add_task("search", total=snapshot.budget, stats="")
-        self.bar.update(self.task, completed=snapshot.evaluations, stats=self._stats(snapshot))
+            self.task = self.bar.add_task("search", total=1.0, count="", stats="", left="")
+        self.bar.update(
+            self.task,
+            completed=self._done(snapshot),
+            count=self._count(snapshot),
+            stats=self._stats(snapshot),
+            left=self._left(snapshot),
+        )
 
     def _tick(self) -> None:
         while not self.stop.wait(self.PLAIN_SECONDS):
@@ -214,14 +247,34 @@ class Progress:
 
     def _print_line(self) -> None:
         snapshot = self.snapshot
-        started, evaluations = self.first
-        rate = (snapshot.evaluations - evaluations) / max(time.monotonic() - started, 1e-9)
         err.print(
-            f"search: {snapshot.evaluations}/{snapshot.budget} evaluations, {self._stats(snapshot)}, "
-            f"{rate:.3g} evaluations/s",
+            f"search: {self._count(snapshot)} evaluations, {self._stats(snapshot)}, "
+            f"{self._rate(snapshot):.3g} evaluations/s, {self._left(snapshot)}",
             markup=False,
             highlight=False,
         )
+
+    def _rate(self, snapshot) -> float:  # noqa: ANN001 - hritest.search.Snapshot
+        started, evaluations = self.first
+        return (snapshot.evaluations - evaluations) / max(time.monotonic() - started, 1e-9)
+
+    def _done(self, snapshot) -> float:  # noqa: ANN001 - hritest.search.Snapshot
+        """The fraction done: of the budget, or without one, of the time limit."""
+        if snapshot.budget is not None:
+            return snapshot.evaluations / snapshot.budget
+        started, _ = self.first
+        return min(1.0, (time.monotonic() - started) / max(snapshot.deadline - started, 1e-9))
+
+    def _left(self, snapshot) -> str:  # noqa: ANN001 - hritest.search.Snapshot
+        left = math.inf if snapshot.deadline is None else max(0.0, snapshot.deadline - time.monotonic())
+        rate = self._rate(snapshot)
+        if snapshot.budget is not None and rate > 0:
+            left = min(left, (snapshot.budget - snapshot.evaluations) / rate)
+        return "time left -" if math.isinf(left) else f"{_clock(left)} left"
+
+    @staticmethod
+    def _count(snapshot) -> str:  # noqa: ANN001 - hritest.search.Snapshot
+        return f"{snapshot.evaluations}" + ("" if snapshot.budget is None else f"/{snapshot.budget}")
 
     @staticmethod
     def _stats(snapshot) -> str:  # noqa: ANN001 - hritest.search.Snapshot
@@ -230,9 +283,16 @@ class Progress:
             f"QD-score {s.qd_score:,.1f}, coverage {s.coverage:.1%}" if s else "QD-score -",
             f"failures {snapshot.failures}",
             f"did not complete {snapshot.failed}",
-            snapshot.phase,
+            f"{snapshot.phase} ({snapshot.proposer})" if snapshot.proposer else snapshot.phase,
         ]
         return ", ".join(parts)
+
+
+def _clock(seconds: float) -> str:
+    """``1:02:03``, ``4:05`` or ``0:07``."""
+    minutes, secs = divmod(int(seconds), 60)
+    hours, minutes = divmod(minutes, 60)
+    return f"{hours}:{minutes:02d}:{secs:02d}" if hours else f"{minutes}:{secs:02d}"
 
 
 def _print_summary(found) -> None:  # noqa: ANN001 - hritest.search.Search
@@ -249,7 +309,7 @@ def _print_summary(found) -> None:  # noqa: ANN001 - hritest.search.Search
     rows = [
         ("run directory", str(found.run_dir.path)),
         ("evaluations", f"{state.evaluations} ({', '.join(f'{n} {k}' for k, n in sorted(statuses.items()))})"),
-        ("wall time", f"{state.elapsed:.1f} s"),
+        ("wall time", f"{state.elapsed:.1f} s" + (", stopped at its time limit" if not found.done else "")),
         ("QD-score", f"{summary.qd_score:,.2f} (normalised {summary.normalized_qd_score:.4f})"),
         ("coverage", f"{summary.coverage:.2%} of {state.result.cells} cells"),
         ("best objective", f"{summary.best:.4g}"),
@@ -274,6 +334,13 @@ def report(
     recordings: Annotated[
         int, typer.Option(min=0, help="record the N worst failures, plus the most different ones, for Rerun (0: none)")
     ] = 10,
+    trust: Annotated[
+        bool,
+        typer.Option(
+            help="load a checkpoint and plugin files that you did not write (a run from someone you trust, or "
+            "from an older hritest); the run is not signed as yours"
+        ),
+    ] = False,
 ) -> None:
     """Write a run's failure report (report/index.html and summary.md) and its failures' Rerun recordings.
 
@@ -282,12 +349,12 @@ def report(
     from hritest.report import compare_runs, write_report
 
     if len(runs) == 1:
-        page = write_report(runs[0], recordings=recordings, out=out_dir)
+        page = write_report(runs[0], recordings=recordings, out=out_dir, trust=trust)
         folder = runs[0] / "recordings"
         if folder.is_dir() and recordings:
             out.print(f"recordings: {folder}", highlight=False)
     else:
-        page = compare_runs(runs, out_dir if out_dir is not None else Path("report-compare"))
+        page = compare_runs(runs, out_dir if out_dir is not None else Path("report-compare"), trust=trust)
     out.print(f"report: {page}", highlight=False)
 
 
@@ -315,6 +382,13 @@ def replay(
     ] = None,
     open_: Annotated[bool, typer.Option("--open", help="open the recording in the Rerun viewer")] = False,
     tolerance: Annotated[float, typer.Option(min=0.0, help="absolute tolerance on the objective and measures")] = 1e-6,
+    trust: Annotated[
+        bool,
+        typer.Option(
+            help="with a run directory: load plugin files that you did not write (a run from someone you "
+            "trust, or from an older hritest); the run is not signed as yours"
+        ),
+    ] = False,
 ) -> None:
     """Re-simulate a failure (or any scenario), check it reproduces, and write its Rerun recording.
 
@@ -329,13 +403,18 @@ def replay(
 
     if not target.exists():
         raise Bad(f"{target} does not exist; give a run directory (with --failure) or a spec (with --theta)")
+    if trust and not target.is_dir():
+        raise typer.BadParameter(
+            "only a run directory is trusted; use it with a RUN and --failure ID", param_hint="--trust"
+        )
     if target.is_dir():
         if failure is None or theta is not None:
             raise typer.BadParameter("with a run directory give --failure ID (and no --theta)", param_hint="--failure")
         run = RunDirectory.open(target)
         record = rp.stored_failure(run, failure)  # bad input fails before anything is written
         path = recording.check_writable(out_path or run.path / "recordings" / f"{failure}.rrd")
-        result = rp.replay_record(rp.run_domain(run), record, spec_digest=run.meta["spec_digest"], tolerance=tolerance)
+        domain = rp.run_domain(run, trust=trust)
+        result = rp.replay_record(domain, record, spec_digest=run.meta["spec_digest"], tolerance=tolerance)
         title = f"{result.domain.spec.name}: failure {failure} ({run.path.resolve().name})"
     elif hc.is_entry(target):
         if failure is not None or theta is not None:

@@ -153,7 +153,7 @@ def _glance(data: RunData) -> list:
             f"{meta.get('algorithm', '?')}, seed {meta.get('seed', '?')}"
             + (f", {meta['inner_iterations']:,} inner iterations" if "inner_iterations" in meta else ""),
         ),
-        ("evaluations", f"{len(data.records)} of a budget of {meta.get('budget', '?')}"),
+        ("evaluations", f"{len(data.records)} {_limits(meta)}"),
         ("statuses", ", ".join(f"{n} {s}" for s, n in sorted(statuses.items()))),
         ("wall time", f"{last['wall_time']:.1f} s" if "wall_time" in last else "not recorded"),
         ("QD-score", f"{last['qd_score']:.2f}" if "qd_score" in last else "not recorded"),
@@ -167,6 +167,17 @@ def _glance(data: RunData) -> list:
         ("started", str(meta.get("created", "?"))),
     ]
     blocks: list = [Table(["", ""], [[k, v] for k, v in rows])]
+    if data.auto is not None:
+        columns = ["batches", "evaluations", "seconds", "time_share", "qd_score_gained", "recent_rate"]
+        blocks.append(
+            Table(
+                ["auto: arm", *columns],
+                [[arm, *(_format(row[c]) for c in columns)] for arm, row in data.auto["arms"].items()],
+                caption="Where --algorithm auto spent the time: each batch goes to the arm with the best recent "
+                "QD-score per second (recent_rate), a losing arm is measured again now and then; every "
+                "choice and its measurements are in auto.json",
+            )
+        )
     if data.surrogate is not None:
         overall = {k: v for k, v in data.surrogate.items() if k not in ("per_outer_iteration", "fits")}
         blocks.append(
@@ -223,6 +234,15 @@ def _view(data: RunData, labelled: Sequence[int], title: str | None = None) -> f
         labelled=labelled,
         kinds={r.index: i + 1 for i, c in enumerate(data.clusters) for r in c.members},
     )
+
+
+def _limits(meta: Mapping) -> str:
+    """``of a budget of 500, in at most 15 min; stopped at the time limit``."""
+    budget, limit, stopped = meta.get("budget", "?"), meta.get("time_limit"), meta.get("stopped")
+    text = "with no evaluation budget" if budget is None else f"of a budget of {budget}"
+    if limit is not None:
+        text += f", a time limit of {limit:g} s per session"
+    return text + (f"; stopped at its {stopped}" if stopped else "")
 
 
 def _progress_table(progress: Sequence[Mapping[str, float]]) -> Table:

@@ -27,6 +27,7 @@ class RunData:
     failures: Sequence[EvaluationRecord]  # the reported failures, worst first
     clusters: Sequence[Cluster]  # the kinds of failure, largest first
     surrogate: Mapping[str, Any] | None
+    auto: Mapping[str, Any] | None = None  # auto.json: where --algorithm auto spent the time, and why
     shrunk: Mapping[int, Mapping[str, Any]] = field(default_factory=dict)  # RUN/shrunk/ID.json, by id
     trust: bool = False  # the user vouches for the run: its plugin files load though another user wrote it
 
@@ -87,7 +88,7 @@ def load_run(path: Path, *, trust: bool = False) -> RunData:
     spec = load_spec(run.path / "spec.yaml")
     by_index = {r.index: r for r in records}
     elite_ids = _elite_ids(run, trust=trust)
-    surrogate = run.path / "surrogate.json"
+    surrogate, auto = run.path / "surrogate.json", run.path / "auto.json"
     failures = [by_index[i] for i in failure_ids(run, records) if i in by_index]
     clusters = cluster_failures(
         failures,
@@ -105,6 +106,7 @@ def load_run(path: Path, *, trust: bool = False) -> RunData:
         failures=failures,
         clusters=clusters,
         surrogate=json.loads(surrogate.read_text()) if surrogate.is_file() else None,
+        auto=json.loads(auto.read_text()) if auto.is_file() else None,
         shrunk=_shrunk(run.path / "shrunk"),
         trust=trust,
     )
@@ -121,11 +123,15 @@ def _shrunk(folder: Path) -> dict[int, dict[str, Any]]:
     return found
 
 
-def _read_progress(path: Path) -> list[dict[str, float]]:
+def _read_progress(path: Path) -> list[dict[str, float | str]]:
+    """``progress.csv``'s rows: numbers, and the name of what proposed each batch."""
     if not path.is_file():
         return []
     with open(path, newline="") as handle:
-        return [{k: float(v) for k, v in row.items() if v not in ("", None)} for row in csv.DictReader(handle)]
+        return [
+            {k: v if k == "proposer" else float(v) for k, v in row.items() if v not in ("", None)}
+            for row in csv.DictReader(handle)
+        ]
 
 
 def _elite_ids(run: RunDirectory, *, trust: bool) -> list[int]:

@@ -8,6 +8,7 @@ run's lock for the whole search, so one run directory has one writer.
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -67,11 +68,17 @@ def start(
     algorithm: str | None = None,
     budget: int | None = None,
     seed: int | None = None,
+    time_limit: float | None = None,
     backend: Backend = Backend(),
     surrogate: SurrogateOptions | None = None,
     progress: Callable[[Snapshot], None] = lambda s: None,
 ) -> Search:
-    """Runs a new search of the spec at ``spec_file``; arguments given override the spec's ``search``."""
+    """Runs a new search of the spec at ``spec_file``; arguments given override the spec's ``search``.
+
+    ``time_limit`` (seconds, counted from this call) stops the search whatever its budget; given
+    without ``budget``, it is the only limit (the spec's budget does not apply).
+    """
+    deadline = _deadline(time_limit)
     surrogate = surrogate or SurrogateOptions()
     spec = load_spec(spec_file)
     domain = compile_spec(spec)
@@ -79,10 +86,11 @@ def start(
     algorithm = algorithm or settings.algorithm
     if algorithm not in ALGORITHMS:
         raise HritestError(f"unknown algorithm {algorithm!r}; choose one of {', '.join(ALGORITHMS)}")
-    budget = budget if budget is not None else settings.budget
+    if budget is None and time_limit is None:
+        budget = settings.budget
     seed = seed if seed is not None else settings.seed
     initial = settings.surrogate.initial_evaluations
-    if algorithm in SURROGATE and budget <= initial:
+    if algorithm in SURROGATE and budget is not None and budget <= initial:
         # It would spend the whole budget on the uniform initial sample: a Random search recorded
         # as SAS/DSAS, which a comparison of algorithms would take at its word.
         raise HritestError(
@@ -92,8 +100,8 @@ def start(
             "or use --algorithm random"
         )
     ref = DomainRef(spec=str(Path(spec_file).resolve()), base=str(Path(spec_file).resolve().parent))
-    meta = {"algorithm": algorithm, "budget": budget, "seed": seed, "spec_base": ref.base}
-    if algorithm in SURROGATE:  # what decides an SAS / DSAS run's cost and quality besides the budget
+    meta = {"algorithm": algorithm, "budget": budget, "time_limit": time_limit, "seed": seed, "spec_base": ref.base}
+    if algorithm in (*SURROGATE, "auto"):  # what decides a surrogate's cost and quality besides the budget
         meta["inner_iterations"] = surrogate.inner_iterations or settings.surrogate.inner_iterations
     evaluator = backend.evaluator(ref)  # before the folder exists: a bad backend leaves nothing behind
     try:
@@ -102,20 +110,37 @@ def start(
             search = Search.new(
                 domain=domain, run=run, algorithm=algorithm, budget=budget, seed=seed, options=surrogate
             )
-            search.run(evaluator, progress)
+            _run(search, evaluator, progress, deadline)
     finally:
         evaluator.close()
     return search
 
 
+def _run(search: Search, evaluator: Evaluator, progress: Callable[[Snapshot], None], deadline: float | None) -> None:
+    """Runs the search to its end, and says in ``run.json`` why it stopped."""
+    search.run(evaluator, progress, deadline=deadline)
+    summary = getattr(search.state.proposer, "summary", None)  # auto's: where the time went
+    search.run_dir.update_meta(
+        stopped="budget" if search.done else "time limit", **({"auto": summary()} if summary else {})
+    )
+
+
+def _deadline(time_limit: float | None) -> float | None:
+    return None if time_limit is None else time.monotonic() + time_limit
+
+
 def resume(
     *,
     run_path: Path,
+    time_limit: float | None = None,
     backend: Backend = Backend(),
     progress: Callable[[Snapshot], None] = lambda s: None,
     trust: bool = False,
 ) -> Search:
     """Continues the run at ``run_path`` from its last checkpoint.
+
+    It runs for ``time_limit`` seconds from this call, or, without one, for the run's own time
+    limit again (``run.json``'s ``time_limit``; none: to the end of its budget).
 
     Every file the resume reads is checked first, and nothing in the run changes unless all agree.
     ``trust`` loads a checkpoint and plugin files that this user did not write (see
@@ -126,6 +151,7 @@ def resume(
         RunDirectoryError: not a run directory; another search writing it; a spec changed since
             the run started; an unverified checkpoint or plugin file; files that disagree.
     """
+    deadline = _deadline(time_limit)
     run = RunDirectory.open(run_path)
     missing = [k for k in ("spec_file", "spec_digest", "spec_base", "algorithm", "seed") if k not in run.meta]
     if missing:
@@ -148,7 +174,10 @@ def resume(
             search = Search.resume(domain=domain, run=run, trust=trust)
             if trust:
                 run.adopt()
-            search.run(evaluator, progress)
+            if time_limit is not None:
+                run.update_meta(time_limit=time_limit)
+            limit = run.meta.get("time_limit")
+            _run(search, evaluator, progress, deadline if time_limit is not None else _deadline(limit))
         finally:
             evaluator.close()
     return search

@@ -160,31 +160,43 @@ class Evaluator:
         _shutdown(self.executor)
         self.on_close()
 
-    def run(self, jobs: Iterable[Job], on_result: Callable[[Job, Evaluation], None]) -> None:
+    def run(
+        self, jobs: Iterable[Job], on_result: Callable[[Job, Evaluation], None], *, deadline: float | None = None
+    ) -> None:
         """Evaluates every job, calling ``on_result`` for each as it finishes (in any order).
+
+        After ``deadline`` (a ``time.monotonic()`` value) no job is started that was never
+        started before; those started finish (retries included), so the jobs evaluated are a
+        prefix of ``jobs``, in their order.
 
         If anything stops it (an interrupt, an error in ``on_result``), the jobs in flight are
         abandoned and the local pool's workers killed, so that none outlives the search.
         """
         try:
-            self._run(jobs, on_result)
+            self._run(jobs, on_result, deadline)
         except BaseException:
             self._kill_workers()
             raise
 
-    def _run(self, jobs: Iterable[Job], on_result: Callable[[Job, Evaluation], None]) -> None:
-        queue = list(jobs)[::-1]  # pop() takes them in order
+    def _run(self, jobs: Iterable[Job], on_result: Callable[[Job, Evaluation], None], deadline: float | None) -> None:
+        queue = list(jobs)[::-1]  # pop() takes them in order; a job put back is appended, so popped next
         suspects: list[Job] = []  # jobs in flight when a worker died: rerun one at a time
         attempts: dict[int, int] = {}
         running: dict[cf.Future, tuple[Job, float]] = {}
         isolated: set[int] = set()  # suspects submitted: nothing may run beside them
-        while queue or suspects or running:
+        started: set[int] = set()
+
+        def startable() -> bool:  # every job put back sits after the fresh ones: the last decides
+            return bool(queue) and (deadline is None or queue[-1].index in started or time.monotonic() < deadline)
+
+        while startable() or suspects or running:
             alone = suspects or any(job.index in isolated for job, _ in running.values())
             capacity = 1 if alone else 2 * self.workers  # one queued per worker: no idle gap
             broken = False
-            while len(running) < capacity and (suspects or queue):
+            while len(running) < capacity and (suspects or startable()):
                 from_suspects = bool(suspects)
                 job = suspects.pop() if from_suspects else queue.pop()
+                started.add(job.index)  # before submitting: a job put back unsubmitted still runs
                 try:
                     future = self.executor.submit(run_job, self.ref, job, self.timeout)
                 except BrokenProcessPool:  # a worker died before we saw it: not this job's doing

@@ -10,6 +10,7 @@ evaluates.
 
 from __future__ import annotations
 
+import time
 import warnings
 
 import numpy as np
@@ -82,12 +83,14 @@ def exploit(
     iterations: int,
     seed: int,
     stall: int | None = None,
+    deadline: float | None = None,
 ) -> ArchiveBase:
     """Runs the inner loop from scratch and returns its archive of surrogate elites.
 
     With ``stall``, it stops early once the archive's QD-score has not grown by
     :data:`STALL_GROWTH` in ``stall`` iterations: an inner loop that has found what the
-    surrogate knows only costs time.
+    surrogate knows only costs time. With ``deadline`` (a ``time.monotonic()`` value), it stops
+    then, after at least one iteration.
     """
     keep_freed_memory()
     settings = domain.spec.search.emitter
@@ -137,6 +140,8 @@ def exploit(
                 scheduler.tell_dqd(*objective.with_jacobian(points))
             solutions = scheduler.ask()
             scheduler.tell(*objective(solutions))
+            if deadline is not None and time.monotonic() >= deadline:
+                break
             if stall is not None:
                 score = archive.stats.qd_score
                 if score > best + STALL_GROWTH * abs(best) or not np.isfinite(best):

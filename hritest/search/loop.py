@@ -14,7 +14,7 @@ import signal
 import time
 import traceback
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 import yaml
@@ -26,15 +26,17 @@ from hritest.interrupt import Interrupted
 from hritest.records import Evaluation, EvaluationRecord, rank_failures
 from hritest.rundir import RunDirectory, RunDirectoryError
 from hritest.search import algorithms, archives
+from hritest.search.auto import Auto
 from hritest.search.executor import Evaluator, Job
 from hritest.search.proposers import ModelFree, SurrogateAssisted, SurrogateOptions
 from hritest.search.state import PendingBatch, ProgressRow, SearchState, check_resumable, evaluation_seed, load_state
 
 SURROGATE = ("sas", "dsas")
+AUTO = "auto"
 # progress.csv, archive.csv and failures.yaml are rewritten at most this often (and at the end):
 # between batches the workers wait, so the loop does only what resuming needs (the checkpoint).
 SUMMARY_SECONDS = 5.0
-ALGORITHMS = (*algorithms.MODEL_FREE, *SURROGATE)
+ALGORITHMS = (*algorithms.MODEL_FREE, *SURROGATE, AUTO)
 ERROR_LOG = "error.log"  # the traceback of a bug in hritest that stopped the search
 
 
@@ -44,16 +46,20 @@ class Snapshot:
 
     ``summary`` and ``failures`` (elites that meet the failure condition) are as of the last
     batch; ``failed`` counts the evaluations that did not complete; ``phase`` says what the
-    search is doing (proposing a batch, which for SAS/DSAS is training the surrogate and searching
-    it, or evaluating one).
+    search is doing: ``proposing`` a batch (for SAS/DSAS, ``training`` the surrogate, then its
+    ``inner loop``) or ``simulating`` one; ``proposer`` is what proposes it (the algorithm, or
+    the one ``auto`` chose). ``budget`` is ``None`` without an evaluation budget, ``deadline``
+    (a ``time.monotonic()`` value) ``None`` without a time limit.
     """
 
     evaluations: int
-    budget: int
+    budget: int | None
     summary: archives.Summary | None
     failures: int
     failed: int = 0
-    phase: str = "evaluating"
+    phase: str = "simulating"
+    proposer: str = ""
+    deadline: float | None = None
 
 
 class Search:
@@ -71,6 +77,9 @@ class Search:
         self.summarised = -math.inf
         self.failed = sum(not r.ok for r in records)  # evaluations that did not complete
         self.last = Snapshot(state.evaluations, state.budget, None, 0, self.failed)
+        self.deadline: float | None = None
+        self.cut: ProgressRow | None = None  # where a batch the deadline cut short got to
+        self.progress: Callable[[Snapshot], None] = lambda s: None
 
     @classmethod
     def new(
@@ -79,14 +88,15 @@ class Search:
         domain: Domain,
         run: RunDirectory,
         algorithm: str,
-        budget: int,
+        budget: int | None,
         seed: int,
         options: SurrogateOptions | None = None,
     ) -> Search:
-        if algorithm in SURROGATE:
-            proposer = SurrogateAssisted(
-                domain, gradients=algorithm == "dsas", seed=seed, options=options or SurrogateOptions()
-            )
+        options = options or SurrogateOptions()
+        if algorithm == AUTO:
+            proposer = Auto(domain, seed=seed, options=options)
+        elif algorithm in SURROGATE:
+            proposer = SurrogateAssisted(domain, gradients=algorithm == "dsas", seed=seed, options=options)
         else:
             proposer = ModelFree(
                 algorithms.scheduler(domain, algorithm, archives.search_archive(domain, seed=seed), seed=seed)
@@ -128,10 +138,43 @@ class Search:
 
     @property
     def done(self) -> bool:
-        return self.state.evaluations >= self.state.budget
+        """Whether the evaluation budget is spent."""
+        return self.state.budget is not None and self.state.evaluations >= self.state.budget
 
-    def run(self, evaluator: Evaluator, progress: Callable[[Snapshot], None] = lambda s: None) -> None:
-        """Runs batches until the budget is spent.
+    @property
+    def out_of_time(self) -> bool:
+        return self.deadline is not None and time.monotonic() >= self.deadline
+
+    @property
+    def seconds_left(self) -> float:
+        """Until the time limit (infinite without one)."""
+        return math.inf if self.deadline is None else self.deadline - time.monotonic()
+
+    @property
+    def qd_score(self) -> float:
+        """The result archive's QD-score now."""
+        return archives.Summary.of(self.state.result, self.domain.spec.objective.range).qd_score
+
+    @property
+    def proposer_name(self) -> str:
+        """What proposes the batches now: the algorithm, or the one that ``auto`` chose."""
+        return getattr(self.state.proposer, "choice", None) or self.state.algorithm
+
+    def phase(self, name: str) -> None:
+        """Tells the progress display what the search is doing now (a proposer calls it)."""
+        self.progress(replace(self.snapshot(), phase=name))
+
+    def run(
+        self,
+        evaluator: Evaluator,
+        progress: Callable[[Snapshot], None] = lambda s: None,
+        *,
+        deadline: float | None = None,
+    ) -> None:
+        """Runs batches until the budget is spent or ``deadline`` (a ``time.monotonic()`` value) passes.
+
+        At the deadline, the batch being simulated ends with the evaluations already started, and
+        the run stops as after a full batch: nothing is lost, and ``--resume`` continues it.
 
         Raises:
             Interrupted: on SIGINT or SIGTERM (see :mod:`hritest.interrupt`), naming the run
@@ -139,9 +182,12 @@ class Search:
             Exception: a bug in hritest, its traceback written to ``error.log`` in the run
                 directory, whose path the exception holds as ``traceback_file``.
         """
+        self.deadline, self.progress = deadline, progress
         try:
-            while not self.done:
-                self.step(evaluator, progress)
+            while not (self.done or self.out_of_time):
+                self.step(evaluator)
+            self.write_summaries(self.failures())
+            self.progress(replace(self.snapshot(), evaluations=len(self.records)))
         except (Interrupted, KeyboardInterrupt) as exc:
             signum = exc.signum if isinstance(exc, Interrupted) else signal.SIGINT
             raise Interrupted(signum, run=self.run_dir.path) from None
@@ -153,14 +199,22 @@ class Search:
             exc.traceback_file = log  # for the command line's one-line message
             raise
 
-    def step(self, evaluator: Evaluator, progress: Callable[[Snapshot], None]) -> None:
-        """One batch: ask (unless a resumed batch is pending), evaluate what is missing, tell."""
+    def step(self, evaluator: Evaluator) -> None:
+        """One batch: ask (unless a resumed batch is pending), evaluate what is missing, tell.
+
+        A batch the deadline cuts short stays pending, as a Ctrl-C leaves it: its evaluations are
+        in the result archive and the summaries, and a resume evaluates the rest and tells it whole,
+        so that a run stopped by time limits and resumed is the run that never stopped.
+        """
         started = time.monotonic()
         state = self.state
+        proposing = 0.0
         if state.pending is None:
-            progress(replace(self.snapshot(), phase="proposing"))
+            self.phase("proposing")
             solutions = state.proposer.ask(self)
-            count = min(len(solutions), state.budget - state.evaluations)
+            proposing = time.monotonic() - started
+            left = math.inf if state.budget is None else state.budget - state.evaluations
+            count = int(min(len(solutions), left))
             pending = PendingBatch(batch=state.batch + 1, solutions=solutions, first=state.evaluations, count=count)
             self.state = state = replace(state, batch=pending.batch, pending=pending)
             with interrupt.deferred():
@@ -182,17 +236,18 @@ class Search:
                 self.records[job.index] = record
             self.failed += not record.ok
             done[0] += 1
-            progress(self.snapshot(extra=done[0]))
+            self.progress(self.snapshot(extra=done[0]))
 
-        evaluator.run(jobs, finished)
-        records = [self.records[first + i] for i in range(count)]
-        state.proposer.tell(self, records, pending.solutions)
+        self.progress(self.snapshot(extra=done[0]))
+        evaluator.run(jobs, finished, deadline=self.deadline)
+        records = [self.records[first + i] for i in range(count) if first + i in self.records]
+        # Told again when a resume completes the batch: adding an elite twice changes nothing.
         self._add_to_result(records)
         summary = archives.Summary.of(state.result, self.domain.spec.objective.range)
         failures = self.failures()
         elapsed = state.elapsed + time.monotonic() - started
         row = ProgressRow(
-            evaluations=state.evaluations + count,
+            evaluations=state.evaluations + len(records),
             batch=batch,
             wall_time=round(elapsed, 3),
             qd_score=summary.qd_score,
@@ -200,17 +255,25 @@ class Search:
             coverage=summary.coverage,
             best=summary.best,
             failures=len(failures),
+            proposer=self.proposer_name,
+            propose_seconds=round(proposing, 3),
         )
+        if len(records) < count:  # the deadline cut the batch: it stays pending, for --resume to finish
+            with interrupt.deferred():
+                self.state = replace(state, elapsed=elapsed)
+                self.run_dir.save_checkpoint(self.state)
+            self.cut = row
+            return
+        state.proposer.tell(self, records, pending.solutions)
         with interrupt.deferred():
             self.state = state = replace(
                 state, evaluations=row.evaluations, pending=None, elapsed=elapsed, progress=(*state.progress, row)
             )
             self.run_dir.save_checkpoint(state)
-        if self.done or time.monotonic() - self.summarised >= SUMMARY_SECONDS:
+        if time.monotonic() - self.summarised >= SUMMARY_SECONDS:
             self.write_summaries(failures)
-            self.summarised = time.monotonic()
-        self.last = Snapshot(state.evaluations, state.budget, summary, len(failures), self.failed)
-        progress(self.last)
+        self.last = replace(self.last, evaluations=state.evaluations, summary=summary, failures=len(failures))
+        self.progress(self.snapshot())
 
     def _add_to_result(self, records: list[EvaluationRecord]) -> None:
         """Adds the successful evaluations to the result archive with their raw objective."""
@@ -245,16 +308,25 @@ class Search:
 
     def snapshot(self, extra: int = 0) -> Snapshot:
         """The last batch's snapshot, with ``extra`` evaluations of the current one finished."""
-        return replace(self.last, evaluations=self.state.evaluations + extra, failed=self.failed, phase="evaluating")
+        return replace(
+            self.last,
+            evaluations=self.state.evaluations + extra,
+            failed=self.failed,
+            phase="simulating",
+            proposer=self.proposer_name,
+            deadline=self.deadline,
+        )
 
     def failures(self) -> list[EvaluationRecord]:
         """The result archive's elites that meet the failure condition, worst first."""
         return rank_failures(self.records[int(i)] for i in self.state.result.data("evaluation"))
 
     def write_summaries(self, failures: list[EvaluationRecord]) -> None:
+        self.summarised = time.monotonic()
         names = [m.name for m in self.domain.measures]
         labels = self.domain.space.labels
-        self.run_dir.write_csv("progress.csv", self.state.progress_rows())
+        cut = [asdict(self.cut)] if self.cut else []
+        self.run_dir.write_csv("progress.csv", self.state.progress_rows() + cut)
         elites = sorted(
             (self.records[int(i)] for i in self.state.result.data("evaluation")),
             key=lambda r: (-r.objective, r.index),

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -32,8 +33,22 @@ class SearchView(Protocol):
         """Evaluations told so far."""
         ...
 
+    @property
+    def qd_score(self) -> float:
+        """The result archive's QD-score, the batch just simulated included (when telling)."""
+        ...
+
+    @property
+    def seconds_left(self) -> float:
+        """Until the run's time limit (infinite without one)."""
+        ...
+
     def dataset(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Training data of every successful evaluation: raw theta, grids, targets."""
+        ...
+
+    def phase(self, name: str) -> None:
+        """Shows what the proposer is doing (``training``, ``inner loop``) in the progress display."""
         ...
 
 
@@ -48,19 +63,32 @@ class ModelFree:
 
     def tell(self, search: SearchView, records: list[EvaluationRecord], solutions: np.ndarray) -> None:
         """Tells full batches (a budget-truncated last batch ends the run anyway)."""
-        if len(records) != len(solutions):
-            return
-        domain = search.domain
-        lo, hi = domain.spec.objective.range
-        bad = lo - (hi - lo)  # below any threshold: ranked last, never an elite
-        ok = [r.ok and math.isfinite(r.search_objective) for r in records]
-        objective = np.array([max(r.search_objective, bad) if good else bad for r, good in zip(records, ok)])
-        measures = np.array(
-            [r.measures if good else [m.range[0] for m in domain.measures] for r, good in zip(records, ok)],
-            dtype=float,
-        ).reshape(len(records), -1)
-        regions = archives.region_measures(domain, [r.regions for r in records])
-        self.scheduler.tell(objective, np.hstack([measures, regions]))
+        if len(records) == len(solutions):
+            self.scheduler.tell(*archive_inputs(search.domain, records))
+
+    def observe(self, search: SearchView, records: list[EvaluationRecord], solutions: np.ndarray) -> None:
+        """Adds evaluations that another proposer asked for to the archive the emitters climb, so
+        that their improvement ranking measures against everything simulated (``auto``)."""
+        objective, measures = archive_inputs(search.domain, records)
+        self.scheduler.archive.add(np.asarray(solutions)[: len(records)], objective, measures)
+
+
+def archive_inputs(domain: Domain, records: list[EvaluationRecord]) -> tuple[np.ndarray, np.ndarray]:
+    """The search archive's objective and measures (the spec's, then the region axes) of ``records``.
+
+    An evaluation that did not complete scores below any threshold, at the measures' low corner:
+    ranked last, never an elite.
+    """
+    lo, hi = domain.spec.objective.range
+    bad = lo - (hi - lo)
+    ok = [r.ok and math.isfinite(r.search_objective) for r in records]
+    objective = np.array([max(r.search_objective, bad) if good else bad for r, good in zip(records, ok)])
+    measures = np.array(
+        [r.measures if good else [m.range[0] for m in domain.measures] for r, good in zip(records, ok)],
+        dtype=float,
+    ).reshape(len(records), -1)
+    regions = archives.region_measures(domain, [r.regions for r in records])
+    return objective, np.hstack([measures, regions])
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -69,6 +97,8 @@ class SurrogateOptions:
 
     inner_iterations: int | None = None
     device: str = "auto"
+    training: str | None = None  # the spec's search.surrogate.training, unless given
+    inner_stall: int | None = None  # the spec's search.surrogate.inner_stall, unless given
 
 
 class SurrogateAssisted:
@@ -99,22 +129,37 @@ class SurrogateAssisted:
             device=pick_device(options.device),
             seed=seed,
         )
-        self.training = settings.training
-        self.stall = settings.inner_stall
+        self.training = options.training or settings.training
+        self.stall = options.inner_stall or settings.inner_stall
         self.trained = 0  # samples the surrogate had seen at its last fit
         self.outer = 0
         self.pending_predictions: np.ndarray | None = None
         self.held_out: list[tuple[int, list[float], list[float]]] = []  # (outer iteration, predicted, true)
         self.fits: list[dict] = []
 
-    def ask(self, search: SearchView) -> np.ndarray:
+    def ask(self, search: SearchView, *, seconds: float | None = None) -> np.ndarray:
+        """One outer iteration's proposals. With ``seconds`` (or the run's time limit, if that
+        comes first), training takes at most about half of that time and the inner loop the rest
+        (``auto`` sizes it to what simulating the batch costs, so that the surrogate never takes
+        more of the run than the simulator)."""
         space = search.domain.space
         done = search.evaluated
         self.pending_predictions = None
         if done < self.initial:
             return self.rng.uniform(space.lower, space.upper, size=(self.initial - done, space.dim))
+        started = time.monotonic()
+        # Training and inner loop end by the run's time limit too: whatever they found is proposed.
+        budget = min(math.inf if seconds is None else seconds, search.seconds_left)
+        end = None if math.isinf(budget) else started + budget
+        search.phase("training")
         theta, grids, targets = search.dataset()
-        fit = self.surrogate.fit(theta, grids, targets, rows=self._rows(len(theta)))
+        fit = self.surrogate.fit(
+            theta,
+            grids,
+            targets,
+            rows=self._rows(len(theta)),
+            deadline=None if end is None else started + budget / 2,
+        )
         self.trained = len(theta)
         self.outer += 1
         self.fits.append(
@@ -125,6 +170,7 @@ class SurrogateAssisted:
                 "predictor_loss": fit.predictor_loss,
             }
         )
+        search.phase("inner loop")
         objective = inner.SurrogateObjective(search.domain, self.surrogate)
         archive = inner.exploit(
             search.domain,
@@ -133,6 +179,7 @@ class SurrogateAssisted:
             iterations=self.iterations,
             stall=self.stall,
             seed=int(self.rng.integers(2**31)),
+            deadline=end,
         )
         proposals = inner.downsample(search.domain, archive, rng=self.rng)
         if len(proposals) == 0:  # an empty surrogate archive: explore instead of stalling

@@ -45,6 +45,8 @@ class ProgressRow:
     coverage: float
     best: float
     failures: int
+    proposer: str = ""  # what proposed the batch: the algorithm, or what auto chose
+    propose_seconds: float = 0.0  # of wall_time, spent proposing it (SAS/DSAS: training, inner loop)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -55,7 +57,7 @@ class SearchState:
     """
 
     algorithm: str
-    budget: int
+    budget: int | None  # None: no evaluation budget (a time limit stops the run)
     seed: int
     proposer: Any  # hritest.search.proposers.ModelFree | SurrogateAssisted
     result: Any  # ribs.archives.GridArchive: the raw objectives of successful evaluations

@@ -17,6 +17,7 @@ code; ``docs/departures.md`` says why, with the measurements.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -92,10 +93,20 @@ class Surrogate:
         self.target_std = torch.ones(outputs, device=device)
 
     def fit(
-        self, theta: np.ndarray, occupancy: np.ndarray | None, targets: np.ndarray, *, rows: np.ndarray | None = None
+        self,
+        theta: np.ndarray,
+        occupancy: np.ndarray | None,
+        targets: np.ndarray,
+        *,
+        rows: np.ndarray | None = None,
+        deadline: float | None = None,
     ) -> Fit:
         """One round of training (batches of ``batch_size``, last partial dropped): on every sample,
         or only on ``rows`` of them (the networks keep what earlier rounds taught them).
+
+        With ``deadline`` (a ``time.monotonic()`` value), each network stops after the epoch in
+        which its share of the time ran out (the occupancy network's is the first half): a round
+        then costs what the caller can spend, and the warm networks learn the rest later.
 
         ``occupancy`` is ``(samples, channels, 32, 32)``; without grids it is not read (None, or
         the ``(samples, 0, 32, 32)`` array a run directory gives). The targets are standardised
@@ -116,12 +127,18 @@ class Surrogate:
         batch = min(self.batch_size, len(x))  # the paper's first round has 100 samples
 
         occupancy_loss, predicted = math.nan, None
+        halfway = None if deadline is None else (time.monotonic() + deadline) / 2
         if self.occupancy is not None:
             kl = nn.KLDivLoss(reduction="batchmean")
             grids = torch.as_tensor(occupancy, dtype=torch.float32, device=self.device)
             self.occupancy.train()
             occupancy_loss = self._epochs(
-                generator, len(x), batch, self.occupancy_optimizer, lambda i: kl(self.occupancy(x[i]), grids[i])
+                generator,
+                len(x),
+                batch,
+                self.occupancy_optimizer,
+                lambda i: kl(self.occupancy(x[i]), grids[i]),
+                deadline=halfway,
             )
             self.occupancy.eval()
             with torch.no_grad():
@@ -133,6 +150,7 @@ class Surrogate:
             batch,
             self.predictor_optimizer,
             lambda i: nn.functional.mse_loss(self.predictor(x[i], _rows(predicted, i)), y[i]),
+            deadline=deadline,
         )
         self.predictor.eval()
         return Fit(occupancy_loss, predictor_loss, len(x))
@@ -144,9 +162,13 @@ class Surrogate:
         batch: int,
         optimizer: torch.optim.Optimizer,
         loss_of: Callable[[torch.Tensor], torch.Tensor],
+        *,
+        deadline: float | None = None,
     ) -> float:
         mean = math.nan
         for _ in range(self.epochs):
+            if deadline is not None and not math.isnan(mean) and time.monotonic() >= deadline:
+                break
             order = torch.randperm(n, generator=generator).to(self.device)
             losses = []
             for start in range(0, n - batch + 1, batch):
