@@ -4,6 +4,10 @@ Two mechanisms, both from the paper's reference: ``bounds`` clips theta into the
 bounds (the teleoperation domain), and ``inside`` / ``no_overlap`` / ``min_separation`` become
 the minimum-displacement mixed-integer program of :mod:`hritest.repair` over the objects' x, y
 (the collaboration domain). Their costs add up; the search subtracts the total, weighted.
+
+Both measure a displacement in the spec's ``repair.units``: as a fraction of its component's
+bounds (``normalised``, so that metres and seconds add up alike), or in the component's own
+units (``raw``, the reference's cost, which adds squared metres to squared seconds).
 """
 
 from __future__ import annotations
@@ -46,7 +50,8 @@ class PenaltyTerms:
     placed object's squared distance to its nearest allowed region (overlaps ignored), the
     reference's inner-loop regulariser. ``columns[i]`` are theta's columns of object i's x and y
     (-1: not searched); ``boxes[i, r]`` is region r's ``[[xlo, xhi], [ylo, yhi]]``, NaN where
-    object i may not go.
+    object i may not go. ``scale[k]`` is the length that counts as one in component k's
+    displacement, as in the repair's cost.
     """
 
     lower: np.ndarray
@@ -54,6 +59,7 @@ class PenaltyTerms:
     clip_groups: list[list[int]] | None
     columns: np.ndarray
     boxes: np.ndarray
+    scale: np.ndarray
 
 
 class ScenarioRepair:
@@ -65,8 +71,10 @@ class ScenarioRepair:
 
     def __init__(self, *, spec: Spec, space: ScenarioSpace) -> None:
         self._lower, self._upper = space.lower, space.upper
+        normalised = spec.repair.units == "normalised"
+        self._scale = space.upper - space.lower if normalised else np.ones_like(space.lower)
         self._clip_groups = _clip_groups(spec, space)
-        self._problem, self._columns, self._nominal = _program(spec, space)
+        self._problem, self._columns, self._nominal = _program(spec, space, self._scale)
 
     @property
     def region_names(self) -> tuple[str, ...]:
@@ -85,7 +93,12 @@ class ScenarioRepair:
             for r in allowed:
                 boxes[i, r] = (regions[r].x, regions[r].y)
         return PenaltyTerms(
-            lower=self._lower, upper=self._upper, clip_groups=self._clip_groups, columns=columns, boxes=boxes
+            lower=self._lower,
+            upper=self._upper,
+            clip_groups=self._clip_groups,
+            columns=columns,
+            boxes=boxes,
+            scale=self._scale,
         )
 
     def check_feasible(self) -> None:
@@ -99,7 +112,7 @@ class ScenarioRepair:
         theta = np.asarray(theta, dtype=float).copy()
         cost = 0.0
         if self._clip_groups is not None:
-            theta, clip_cost = repair.clip_repair(theta, self._lower, self._upper, self._clip_groups)
+            theta, clip_cost = repair.clip_repair(theta, self._lower, self._upper, self._clip_groups, scale=self._scale)
             cost += float(clip_cost)
         if self._problem is None:
             return RepairOutcome(theta=self._within_bounds(theta), cost=cost, regions={})
@@ -144,7 +157,7 @@ def _clip_groups(spec: Spec, space: ScenarioSpace) -> list[list[int]] | None:
     return groups
 
 
-def _program(spec: Spec, space: ScenarioSpace):  # noqa: ANN202 - (problem, columns, nominal xy)
+def _program(spec: Spec, space: ScenarioSpace, scale: np.ndarray):  # noqa: ANN202 - (problem, columns, nominal xy)
     placement = [
         c for c in spec.constraints if isinstance(c, InsideConstraint | NoOverlapConstraint | MinSeparationConstraint)
     ]
@@ -173,11 +186,13 @@ def _program(spec: Spec, space: ScenarioSpace):  # noqa: ANN202 - (problem, colu
     # Column of theta holding each object's x and y (-1: not searched, keep nominal).
     columns = -np.ones((len(names), 2), dtype=int)
     bounds = np.empty((len(names), 2, 2))
+    scales = np.ones((len(names), 2))  # a coordinate that is not searched never moves: any scale will do
     nominal = np.array([objects[name].position[:2] for name in names], dtype=float)
     for slot in space.slots:
         if slot.target in index and slot.attribute in ("x", "y"):  # the program places in x, y only
             i, axis = index[slot.target], "xy".index(slot.attribute)
             columns[i, axis] = slot.start
+            scales[i, axis] = scale[slot.start]
     for i in range(len(names)):
         for axis in range(2):
             searched = columns[i, axis] >= 0
@@ -193,5 +208,6 @@ def _program(spec: Spec, space: ScenarioSpace):  # noqa: ANN202 - (problem, colu
         no_overlap=tuple(sorted(no_overlap)),
         min_separation=tuple((i, j, d) for (i, j), d in sorted(separation.items())),
         bounds=bounds,
+        scales=scales,
     )
     return problem, columns, nominal

@@ -1,8 +1,9 @@
 """The outcome digest: what decides a scenario's outcome, digested part by part.
 
 A corpus entry replays a stored scenario; whether it still fails depends on the compiled scenario
-space, the constraints that repair it, the task and policies (their references, params and source
-files), the world model files, and the objective, measure and failure expressions. It does not
+space, the constraints that repair it and the units of the repair's cost, the task and policies
+(their references, params and source files), the world model files, and the objective, measure and
+failure expressions. It does not
 depend on comments, formatting or search settings, so those are left out: editing them changes
 nothing here. Each part is digested on its own so that a changed entry can say *what* changed.
 """
@@ -44,6 +45,7 @@ def outcome_digest(domain: Any) -> OutcomeDigest:
             "world": spec.world.model_dump() if spec.world else None,
         },
         "constraints": [c.model_dump() for c in spec.constraints],
+        "repair": spec.repair.model_dump(),
         "task": spec.task.model_dump(),
         "robot policy": spec.robot.model_dump(),
         "human policy": spec.human.model_dump(),

@@ -30,7 +30,7 @@ from hritest.records import Clause, Evaluation, Status, clauses_text
 
 THETA_TOLERANCE = 1e-9  # a stored repaired theta and the one its raw theta repairs to now
 # Changing these parts may legitimately move the repaired theta; otherwise it must not move.
-REPAIR_PARTS = ("scenario space", "scene", "constraints")
+REPAIR_PARTS = ("scenario space", "scene", "constraints", "repair")
 
 
 class Verdict(StrEnum):
@@ -150,8 +150,8 @@ def judge(entry: Entry, replays: Sequence[SeedReplay], *, changes: Sequence[str]
         if moved:
             return error(
                 f"{entry.path}: field 'theta' does not repair to the stored field 'theta_repaired' "
-                f"({'; '.join(moved)}), and neither the scenario space nor the constraints changed: the "
-                "entry was edited. Restore it from version control, or promote the failure again",
+                f"({'; '.join(moved)}), and neither the scenario space nor the constraints or their repair "
+                "changed: the entry was edited. Restore it from version control, or promote the failure again",
                 changes=changes,
             )
     failing = [r for r in replays if r.failure]

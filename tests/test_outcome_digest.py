@@ -37,6 +37,7 @@ def test_each_outcome_part_is_named_when_it_changes(toy_spec, tmp_path):
         ("time_limit: 10.0", "time_limit: 12.0"): ["task"],
         ("expr: norm(noise)", "expr: human_variation"): ["measures"],
         ("{type: bounds, groups: [[g0x, g1x], [g0y, g1y], [noise]]}", "{type: bounds}"): ["constraints"],
+        ("constraints:\n", "repair: {units: raw}\nconstraints:\n"): ["repair"],
     }
     for (old, new), parts in cases.items():
         assert changed(before, digest_of(toy_spec(old, new))) == parts, (old, new)

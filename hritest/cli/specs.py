@@ -128,7 +128,7 @@ def show(spec: SpecArg) -> None:
     out.print(archive)
     out.print(
         f"objective {s.objective.expr} in [{s.objective.range[0]:g}, {s.objective.range[1]:g}] "
-        f"(search subtracts {s.objective.repair_weight:g} x repair cost)",
+        f"(search subtracts {s.objective.repair_weight:g} x repair cost, in {s.repair.units} units)",
         highlight=False,
     )
     out.print(f"failure when {s.failure}", highlight=False)

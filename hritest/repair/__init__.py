@@ -2,10 +2,11 @@
 
 Two repairs, as in the reference (``dsas``):
 
-* :func:`repair` moves object centres as little as possible (sum of squared displacements) so that
-  each centre lies in one of its allowed regions and within its bounds, no two footprints overlap
-  and separated pairs are far enough apart: the paper's repair MIP, solved with OR-Tools CP-SAT
-  on an integer lattice.
+* :func:`repair` moves object centres as little as possible (sum of squared displacements, each
+  over its scale: in metres, or as a fraction of the coordinate's range) so that each centre lies
+  in one of its allowed regions and within its bounds, no two footprints overlap and separated
+  pairs are far enough apart: the paper's repair MIP, solved with OR-Tools CP-SAT on an integer
+  lattice.
 * :func:`clip_repair` clips a box-bounded parameter vector (the teleoperation domain).
 
 Everything here is pure computation: no I/O, no printing, no global state. The modules: the

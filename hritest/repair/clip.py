@@ -12,6 +12,8 @@ def clip_repair(
     lo: np.ndarray,
     hi: np.ndarray,
     groups: Sequence[Sequence[int]] | None = None,
+    *,
+    scale: np.ndarray | None = None,
 ) -> tuple[np.ndarray, float]:
     """Clips ``theta`` into ``[lo, hi]`` and returns the reference's clipping cost.
 
@@ -21,18 +23,23 @@ def clip_repair(
     teleoperation domain groups the goals' x coordinates, their y coordinates and the waypoint
     noises, giving ``(sum e_x)^2 + (sum e_y)^2 + (sum e_noise)^2``. ``groups=None``, or a
     component listed in no group, makes each component its own group (a plain sum of squares).
+    Each excess is first divided by its component's ``scale``, so that components in different
+    units (metres, seconds) can be measured alike, as fractions of their bounds' widths, say.
 
     Args:
         theta: ``(d,)`` or ``(batch, d)``.
         lo: ``(d,)`` lower bounds.
         hi: ``(d,)`` upper bounds.
         groups: Disjoint lists of component indices.
+        scale: ``(d,)`` positive lengths that count as one in each component's excess (default:
+            1, theta's own units, the reference's cost).
 
     Returns:
         The clipped ``theta`` (same shape) and the cost, of shape ``()`` or ``(batch,)``.
 
     Raises:
-        ValueError: Shapes disagree, ``lo > hi``, or a group index is out of range or repeated.
+        ValueError: Shapes disagree, ``lo > hi``, a scale is not positive, or a group index is out
+            of range or repeated.
     """
     theta = np.asarray(theta, dtype=float)
     lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
@@ -44,7 +51,10 @@ def clip_repair(
         )
     if (lo > hi).any():
         raise ValueError(f"lo must be <= hi; components {np.flatnonzero(lo > hi).tolist()} are not")
-    excess = np.maximum(lo - theta, 0.0) + np.maximum(theta - hi, 0.0)
+    scale = np.ones(d) if scale is None else np.asarray(scale, dtype=float)
+    if scale.shape != (d,) or not (scale > 0).all() or not np.isfinite(scale).all():
+        raise ValueError(f"scale must be {d} positive finite lengths, one per component; got {scale.tolist()}")
+    excess = (np.maximum(lo - theta, 0.0) + np.maximum(theta - hi, 0.0)) / scale
     cost = ((excess @ _membership(groups, d).T) ** 2).sum(axis=-1)
     return np.clip(theta, lo, hi), cost[()] if theta.ndim == 1 else cost
 

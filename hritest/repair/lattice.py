@@ -21,7 +21,8 @@ from hritest.repair.validity import _exact, _inside
 LATTICE_BITS = 12
 _SCALE = 2**LATTICE_BITS  # lattice units per metre
 #: Objective coefficients are the real ones times 2**10, rounded: the returned lattice point is
-#: optimal for the real target up to ~(n + |offset| / 2048) units^2.
+#: optimal for the real target up to ~(n + |offset| / 2048) units^2. With scales (a cost in other
+#: units than metres) the widest scale's coordinates keep exactly this factor (:func:`_weights`).
 _OBJ_SCALE = 2**10
 #: Largest |coordinate| in lattice units (512 m): keeps every objective term far below 2**62.
 _MAX_UNITS = 2**21
@@ -43,26 +44,30 @@ class _Model:
     box itself) so that the LP relaxation sees the region choice. The cost of a box is a constant
     (target to ``P_b``) times ``z_b``, plus ``e_b**2`` with tangent cuts, plus a linear term, so
     the LP bound starts at the projection cost instead of 0 (docs/decisions.md, "The repair
-    program's form").
+    program's form"). Each object's axis weighs its squared displacement by its integer weight
+    (:func:`_weights`).
     """
 
     def __init__(self, problem: RepairProblem, xy: np.ndarray, boxes: list[list[Box]], hint: np.ndarray) -> None:
         self.model = cp_model.CpModel()
         self.pos: list[list] = []  # per object and axis: the centre, a linear expression
-        self.cost: list[list] = []  # per object and axis: ~_OBJ_SCALE * squared displacement
+        self.cost: list[list] = []  # per object and axis: ~weight * squared displacement
         self.slack: list[float] = []  # per object: how far below the true cost `cost` may be
         self.choice: list[list[tuple[int | None, cp_model.IntVar]]] = []
         self.target = xy * _SCALE  # exact
+        self.weights = _weights(problem.scales)
         for i, candidates in enumerate(boxes):
-            self._add_object(problem.object_names[i], self.target[i], candidates, hint[i] * _SCALE)
+            self._add_object(problem.object_names[i], self.target[i], candidates, hint[i] * _SCALE, self.weights[i])
         for i, j in problem.no_overlap:
             self._add_pair(i, j, _no_overlap_lines(problem, i, j))
         for i, j, d in problem.min_separation:
             self._add_pair(i, j, _separation_lines(d))
         self.model.minimize(sum(c for costs in self.cost for c in costs))
 
-    def _add_object(self, name: str, target: np.ndarray, candidates: list[Box], hint: np.ndarray) -> None:
-        m, scale = self.model, _OBJ_SCALE
+    def _add_object(
+        self, name: str, target: np.ndarray, candidates: list[Box], hint: np.ndarray, weights: list[int]
+    ) -> None:
+        m = self.model
         pos, cost, lits, width = [0, 0], [0, 0], [], 0
         hinted = next((b for b, (_, lo, hi) in enumerate(candidates) if _inside(hint / _SCALE, *zip(lo, hi), 0)), 0)
         for b, (region, lo, hi) in enumerate(candidates):
@@ -84,8 +89,8 @@ class _Model:
                 m.add_multiplication_equality(sq, [e, e])
                 for t in _tangent_points(elo, ehi):
                     m.add(sq >= (2 * t + 1) * e - t * (t + 1))
-                offset = anchor - target[k]
-                cost[k] += round(scale * offset**2) * z + scale * sq + round(2 * scale * offset) * e
+                offset, weight = anchor - target[k], weights[k]
+                cost[k] += round(weight * offset**2) * z + weight * sq + round(2 * weight * offset) * e
                 pos[k] += anchor * z + e
             lits.append((region, z))
         if not lits:
@@ -101,27 +106,42 @@ class _Model:
         """At least one of ``lines`` holds; plus lower bounds on the pair's cost.
 
         Meeting ``u . (p_j - p_i) >= R`` moves the pair by at least the shortfall along ``u``,
-        split evenly at best (boxes ignored, so always valid). Tied to each line's literal (and,
-        for the many circle lines, also as their minimum, or the LP spreads the literals thinly)
-        this puts a pair cost into the LP bound, which otherwise sees only separate projections.
+        split evenly at best (boxes ignored, so always valid), at the least weight of the axes it
+        moves along. Tied to each line's literal (and, for the many circle lines, also as their
+        minimum, or the LP spreads the literals thinly) this puts a pair cost into the LP bound,
+        which otherwise sees only separate projections.
         """
         sides = _separating_lines(self.model, self.pos[i], self.pos[j], lines)
         pair_cost = [self.cost[i][k] + self.cost[j][k] for k in range(2)]
         delta, slack, least = self.target[j] - self.target[i], self.slack[i] + self.slack[j], []
+        lightest = [min(self.weights[i][k], self.weights[j][k]) for k in range(2)]
         for (u, rhs), side in zip(lines, sides):
             short = max(rhs - u[0] * delta[0] - u[1] * delta[1], 0) / math.hypot(*u)
             axes = [k for k in range(2) if u[k]]
-            bound = math.floor(_OBJ_SCALE * short**2 / 2 - len(axes) * slack)
+            bound = math.floor(min(lightest[k] for k in axes) * short**2 / 2 - len(axes) * slack)
             if bound > 0:
                 self.model.add(sum(pair_cost[k] for k in axes) >= bound * side)
             least.append(short)
-        bound = math.floor(_OBJ_SCALE * min(least) ** 2 / 2 - 2 * slack)
+        bound = math.floor(min(lightest) * min(least) ** 2 / 2 - 2 * slack)
         if len(lines) > 4 and bound > 0:
             self.model.add(pair_cost[0] + pair_cost[1] >= bound)
 
 
 class _NoLatticePointError(Exception):
     pass
+
+
+def _weights(scales: np.ndarray) -> list[list[int]]:
+    """The objective's integer weight of each object's axis: ``_OBJ_SCALE * (widest / scale)**2``,
+    rounded. The widest scale weighs exactly ``_OBJ_SCALE`` (all of them, for the paper's cost in
+    m^2), and no weight less, so no coefficient loses precision; the rounding moves the others'
+    ratios by at most 1 in 2048."""
+    return [[round(_OBJ_SCALE * (scales.max() / s) ** 2) for s in row] for row in scales]
+
+
+def _reach(scales: np.ndarray) -> float:
+    """The largest |coordinate| (m) whose objective terms fit CP-SAT's 64 bits at these scales."""
+    return _MAX_UNITS / _SCALE * scales.min() / scales.max()
 
 
 def _lattice_box(lo: np.ndarray, hi: np.ndarray) -> tuple[list[int], list[int]] | None:

@@ -55,6 +55,10 @@ class RepairProblem:
         min_separation: ``(i, j, d)``: the centres of ``i`` and ``j`` are at least ``d`` apart.
         bounds: ``(n, 2, 2)``; ``bounds[i, 0] = (xlo, xhi)`` and ``bounds[i, 1] = (ylo, yhi)``
             bound each centre.
+        scales: ``(n, 2)`` positive lengths that count as one in the cost, per object and axis:
+            the cost is ``sum(((moved) / scales) ** 2)``. Default: 1 m everywhere, a cost in m^2
+            (the paper's); the width of each coordinate's bounds makes it a sum of squared
+            fractions of the ranges the coordinates may vary over.
 
     Raises:
         ValueError: Shapes, indices or values are inconsistent; the message says which.
@@ -67,6 +71,7 @@ class RepairProblem:
     no_overlap: tuple[tuple[int, int], ...] = ()
     min_separation: tuple[tuple[int, int, float], ...] = ()
     bounds: np.ndarray
+    scales: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         names = tuple(self.object_names)
@@ -79,6 +84,9 @@ class RepairProblem:
         bounds = _frozen_array(self.bounds, (n, 2, 2), "bounds")
         if (bounds[:, :, 0] > bounds[:, :, 1]).any():
             raise ValueError("bounds[i, axis] must be (lo, hi) with lo <= hi; swap the bounds")
+        scales = _frozen_array(np.ones((n, 2)) if self.scales is None else self.scales, (n, 2), "scales")
+        if (scales <= 0).any():
+            raise ValueError(f"scales must be > 0, got {scales.tolist()}")
         allowed = tuple(tuple(int(r) for r in a) for a in self.allowed_regions)
         if len(allowed) != n:
             raise ValueError(f"allowed_regions needs one tuple per object ({n}), got {len(allowed)}")
@@ -95,6 +103,7 @@ class RepairProblem:
             ("object_names", names),
             ("half_sizes", sizes),
             ("bounds", bounds),
+            ("scales", scales),
             ("regions", tuple(self.regions)),
             ("allowed_regions", allowed),
             ("no_overlap", pairs),
@@ -114,7 +123,8 @@ class RepairResult:
 
     Attributes:
         xy: ``(n, 2)`` repaired centres (the input when nothing could be done).
-        cost: Sum of squared displacements in m^2, computed from ``xy``.
+        cost: Sum of squared displacements, each over its scale (``RepairProblem.scales``; in m^2
+            by default), computed from ``xy``.
         regions: Per object, the index of the region it ends in (``None``: no region constraint,
             or no repair).
         status: ``"unchanged"``, ``"repaired"``, ``"infeasible"``, ``"timeout"`` or ``"error"``.

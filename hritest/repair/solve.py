@@ -9,14 +9,14 @@ from collections.abc import Sequence
 import numpy as np
 from ortools.sat.python import cp_model
 
-from hritest.repair.lattice import _MAX_UNITS, _OBJ_SCALE, _SCALE, LATTICE_BITS, Box, _Model, _NoLatticePointError
+from hritest.repair.lattice import _OBJ_SCALE, _SCALE, LATTICE_BITS, Box, _Model, _NoLatticePointError, _reach
 from hritest.repair.problem import RepairProblem, RepairResult
 from hritest.repair.validity import _apart, _region_of, _separated, is_valid, violations
 
 
 def repair(problem: RepairProblem, xy: np.ndarray, *, time_limit: float = 1.0) -> RepairResult:
-    """Moves the centres as little as possible (sum of squared displacements) to satisfy every
-    constraint: the paper's repair MIP.
+    """Moves the centres as little as possible (sum of squared displacements, each over its
+    ``problem.scales``) to satisfy every constraint: the paper's repair MIP.
 
     Three stages, cheapest first:
 
@@ -66,15 +66,17 @@ def repair(problem: RepairProblem, xy: np.ndarray, *, time_limit: float = 1.0) -
             "infeasible",
             "an object's allowed regions all lie outside its bounds; run check_feasible(problem) to see which",
         )
-    projected, chosen = _project(xy, boxes)
+    projected, chosen = _project(xy, boxes, problem.scales)
     if is_valid(problem, projected, tol=0.0):
         regions = [region for region, _, _ in chosen]
-        return _result(xy, projected, regions, "projected each object onto its nearest region")
+        return _result(problem, xy, projected, regions, "projected each object onto its nearest region")
     return _solve(problem, xy, boxes, _push_apart(problem, xy, projected, chosen), time_limit)
 
 
-def _result(xy0: np.ndarray, xy: np.ndarray, regions: Sequence[int | None], message: str) -> RepairResult:
-    return RepairResult(xy, float(((xy - xy0) ** 2).sum()), tuple(regions), "repaired", message)
+def _result(
+    problem: RepairProblem, xy0: np.ndarray, xy: np.ndarray, regions: Sequence[int | None], message: str
+) -> RepairResult:
+    return RepairResult(xy, float((((xy - xy0) / problem.scales) ** 2).sum()), tuple(regions), "repaired", message)
 
 
 def _failed(xy: np.ndarray, status: str, message: str) -> RepairResult:
@@ -97,12 +99,12 @@ def _boxes(problem: RepairProblem, i: int) -> list[Box]:
     return boxes
 
 
-def _project(xy: np.ndarray, boxes: list[list[Box]]) -> tuple[np.ndarray, list[Box]]:
+def _project(xy: np.ndarray, boxes: list[list[Box]], scales: np.ndarray) -> tuple[np.ndarray, list[Box]]:
     """Each object clipped into its cheapest box (the first on ties), and those boxes."""
     out, chosen = np.empty_like(xy), []
     for i, candidates in enumerate(boxes):
         clipped = [np.clip(xy[i], lo, hi) for _, lo, hi in candidates]
-        best = int(np.argmin([((c - xy[i]) ** 2).sum() for c in clipped]))
+        best = int(np.argmin([(((c - xy[i]) / scales[i]) ** 2).sum() for c in clipped]))
         out[i] = clipped[best]
         chosen.append(candidates[best])
     return out, chosen
@@ -141,8 +143,9 @@ def _separate_boxes(problem: RepairProblem, xy0: np.ndarray, xy: np.ndarray, i: 
         xj = min(max(xy[j, k] + sign * deficit - (xy[i, k] - xi), lo[j]), hi[j])
         xi = xy[i, k] - sign * deficit + (xj - xy[j, k])
         if lo[i] <= xi <= hi[i]:
-            rise = (xi - xy0[i, k]) ** 2 + (xj - xy0[j, k]) ** 2 - (xy[i, k] - xy0[i, k]) ** 2
-            moves.append((rise - (xy[j, k] - xy0[j, k]) ** 2, k, xi, xj))
+            si, sj = problem.scales[i, k] ** 2, problem.scales[j, k] ** 2
+            rise = (xi - xy0[i, k]) ** 2 / si + (xj - xy0[j, k]) ** 2 / sj - (xy[i, k] - xy0[i, k]) ** 2 / si
+            moves.append((rise - (xy[j, k] - xy0[j, k]) ** 2 / sj, k, xi, xj))
     if moves:
         _, k, xy[i, k], xy[j, k] = min(moves)
 
@@ -151,11 +154,11 @@ def _solve(
     problem: RepairProblem, xy: np.ndarray, boxes: list[list[Box]], hint: np.ndarray, time_limit: float
 ) -> RepairResult:
     extent = max([np.abs(xy).max()] + [np.abs([lo, hi]).max() for b in boxes for _, lo, hi in b])
-    if extent * _SCALE > _MAX_UNITS:
+    if extent > _reach(problem.scales):
         return _failed(
             xy,
             "error",
-            f"coordinates beyond {_MAX_UNITS / _SCALE:g} m do not fit "
+            f"coordinates beyond {_reach(problem.scales):g} m do not fit "
             "the repair lattice; express positions in metres near the origin",
         )
     try:
@@ -224,7 +227,7 @@ def _extract(
         return _failed(
             xy0, "error", "internal error: the lattice solution violates " + "; ".join(violations(problem, xy))
         )
-    return _result(xy0, xy, regions, f"CP-SAT optimum on the 2**-{LATTICE_BITS} m lattice")
+    return _result(problem, xy0, xy, regions, f"CP-SAT optimum on the 2**-{LATTICE_BITS} m lattice")
 
 
 def _polish(problem: RepairProblem, xy0: np.ndarray, xy: np.ndarray, chosen: list[Box]) -> np.ndarray:

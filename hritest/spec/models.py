@@ -301,6 +301,17 @@ Constraint = Annotated[
 ]
 
 
+class RepairSpec(Strict):
+    """How the repair measures what it moves: the cost it minimises, which the search subtracts."""
+
+    units: Literal["normalised", "raw"] = Field(
+        "normalised",
+        description="normalised: each parameter's displacement as a fraction of its bounds' width, so that "
+        "metres, seconds and radians add up alike; raw: in the parameters' own units, as the paper's reference "
+        "(its specs say so)",
+    )
+
+
 class PolicySpec(Strict):
     """A robot or human policy: a registered name, ``module:Class`` or ``path/file.py:Class``."""
 
@@ -426,6 +437,7 @@ class Spec(Strict):
     objects: list[ObjectSpec] = Field(default_factory=list)
     parameters: list[ParameterSpec] = Field(min_length=1)
     constraints: list[Constraint] = Field(default_factory=list)
+    repair: RepairSpec = Field(default_factory=RepairSpec)
     robot: PolicySpec
     human: PolicySpec
     objective: ObjectiveSpec
