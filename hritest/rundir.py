@@ -375,25 +375,25 @@ class RunDirectory:
 
     def evaluations(self) -> list[EvaluationRecord]:
         """Every committed evaluation, in order (a torn last line from a kill is dropped)."""
+        return list(self.iter_evaluations())
+
+    def iter_evaluations(self) -> Iterator[EvaluationRecord]:
+        """:meth:`evaluations` one at a time, for a run too long to hold in memory."""
         path = self.path / "evaluations.jsonl"
         if not path.exists():
-            return []
-        lines = path.read_text().splitlines()
-        records = []
-        for number, line in enumerate(lines, start=1):
-            try:
-                records.append(EvaluationRecord.from_json(json.loads(line)))
-            except json.JSONDecodeError:
-                if number != len(lines):
-                    raise RunDirectoryError(f"{path}:{number} is corrupt; the run cannot be read") from None
-            except (KeyError, ValueError, TypeError) as exc:
-                raise RunDirectoryError(
-                    f"{path}:{number} is not an evaluation record ({type(exc).__name__}: {exc}); the run cannot be read"
-                ) from None
-        return records
+            return
+        with open(path) as handle:
+            previous = None
+            for number, line in enumerate(handle, start=1):
+                if previous is not None:
+                    yield _record(path, number - 1, previous)
+                previous = line
+            if previous is not None and (last := _record(path, number, previous, last=True)) is not None:
+                yield last
 
     def occupancy(self, shape: tuple[int, ...]) -> np.ndarray:
-        """``(evaluations, *shape)`` occupancy grids of the evaluations whose records are written.
+        """``(evaluations, *shape)`` occupancy grids of the evaluations whose records are written,
+        memory-mapped (read from disk only when indexed).
 
         With grids that is every committed evaluation, and maybe one more whose line is not yet
         written; callers keep as many rows as they read lines. Zero-size records (a task without
@@ -401,19 +401,25 @@ class RunDirectory:
         """
         size = int(np.prod(shape))
         if size == 0:
-            return np.zeros((len(self.evaluations()), *shape), np.float32)
+            return np.zeros((sum(1 for _ in self.iter_evaluations()), *shape), np.float32)
         path = self.path / "occupancy.f32"
-        data = np.fromfile(path, dtype=np.float32) if path.exists() else np.zeros(0, np.float32)
-        count = len(data) // size
-        return data[: count * size].reshape(count, *shape)
+        count = (path.stat().st_size if path.exists() else 0) // (4 * size)
+        if count == 0:
+            return np.zeros((0, *shape), np.float32)
+        return np.memmap(path, dtype=np.float32, mode="r", shape=(count, *shape))
 
     def truncate(self, count: int, shape: tuple[int, ...]) -> None:
-        """Cuts both append-only files back to ``count`` committed evaluations (used on resume)."""
-        lines = (self.path / "evaluations.jsonl").read_text().splitlines(keepends=True) if count else []
-        atomic_write(self.path / "evaluations.jsonl", "".join(lines[:count]))
-        path = self.path / "occupancy.f32"
+        """Cuts both append-only files back to ``count`` committed evaluations (used on resume),
+        reading no more of them than it keeps."""
+        path = self.path / "evaluations.jsonl"
         if path.exists():
             with open(path, "r+b") as handle:
+                for _ in range(count):
+                    handle.readline()
+                handle.truncate(handle.tell())
+        grids = self.path / "occupancy.f32"
+        if grids.exists():
+            with open(grids, "r+b") as handle:
                 handle.truncate(count * int(np.prod(shape)) * 4)
 
     # --- state and summaries -----------------------------------------------------------------
@@ -462,6 +468,20 @@ class RunDirectory:
 
     def write_text(self, name: str, text: str) -> None:
         atomic_write(self.path / name, text)
+
+
+def _record(path: Path, number: int, line: str, *, last: bool = False) -> EvaluationRecord | None:
+    """Line ``number`` of ``evaluations.jsonl``; a torn ``last`` line (a kill mid-write) is None."""
+    try:
+        return EvaluationRecord.from_json(json.loads(line))
+    except json.JSONDecodeError:
+        if last:
+            return None
+        raise RunDirectoryError(f"{path}:{number} is corrupt; the run cannot be read") from None
+    except (KeyError, ValueError, TypeError) as exc:
+        raise RunDirectoryError(
+            f"{path}:{number} is not an evaluation record ({type(exc).__name__}: {exc}); the run cannot be read"
+        ) from None
 
 
 def unpack(archive: Path, into: Path) -> RunDirectory:

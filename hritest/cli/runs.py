@@ -6,7 +6,6 @@ import math
 import os
 import threading
 import time
-from collections import Counter
 from pathlib import Path
 from typing import Annotated
 
@@ -155,7 +154,7 @@ def search(
         err.print("writing the report (re-simulating the failures it records)...", highlight=False)
     report = write_report(found.run_dir.path)
     out.print(f"report: {report}", highlight=False)
-    if not any(r.ok for r in found.records.values()):
+    if found.failed == found.written:
         err.print(
             f"no evaluation completed: see the status and message of each in {found.run_dir.path / 'evaluations.jsonl'}"
             " (try one with 'hritest simulate')",
@@ -300,7 +299,7 @@ def _print_summary(found) -> None:  # noqa: ANN001 - hritest.search.Search
 
     state = found.state
     summary = Summary.of(state.result, found.domain.spec.objective.range)
-    statuses = Counter(record.status.value for record in found.records.values())
+    statuses = found.statuses
     table = Table(
         title=f"{found.domain.spec.name}: {state.algorithm}, seed {state.seed}",
         title_justify="left",

@@ -13,7 +13,8 @@ import math
 import signal
 import time
 import traceback
-from collections.abc import Callable
+from collections import Counter
+from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, replace
 
 import numpy as np
@@ -23,13 +24,14 @@ from hritest import interrupt
 from hritest.domain import Domain
 from hritest.errors import HritestError
 from hritest.interrupt import Interrupted
-from hritest.records import Evaluation, EvaluationRecord, rank_failures
+from hritest.records import Evaluation, EvaluationRecord, Status, rank_failures
 from hritest.rundir import RunDirectory, RunDirectoryError
 from hritest.search import algorithms, archives
 from hritest.search.auto import Auto
 from hritest.search.executor import Evaluator, Job
 from hritest.search.proposers import ModelFree, SurrogateAssisted, SurrogateOptions
 from hritest.search.state import PendingBatch, ProgressRow, SearchState, check_resumable, evaluation_seed, load_state
+from hritest.search.training import GridRows, TrainingData
 
 SURROGATE = ("sas", "dsas")
 AUTO = "auto"
@@ -63,23 +65,60 @@ class Snapshot:
 
 
 class Search:
-    """A model-free QD search over a domain, writing into a run directory.
+    """A QD search over a domain, writing into a run directory.
 
-    Build with :meth:`new` or :meth:`resume`; then :meth:`run`.
+    Build with :meth:`new` or :meth:`resume`; then :meth:`run`. Every evaluation goes to the run
+    directory as it finishes; the search keeps in memory only the records of its result
+    archive's elites and of the batch in flight, counts of the rest, and, for a surrogate, the
+    compact :class:`~hritest.search.training.TrainingData`: its memory does not grow with the run.
     """
 
     def __init__(
-        self, *, domain: Domain, run: RunDirectory, state: SearchState, records: list[EvaluationRecord]
+        self, *, domain: Domain, run: RunDirectory, state: SearchState, records: Iterable[EvaluationRecord]
     ) -> None:
         self.domain, self.run_dir, self.state = domain, run, state
-        self.records: dict[int, EvaluationRecord] = {r.index: r for r in records}
         self.occupancy_shape = occupancy_shape(domain)
+        self.kept: dict[int, EvaluationRecord] = {}  # the result archive's elites and the batch in flight
+        self.statuses: Counter[str] = Counter()  # of every evaluation written
+        self.training = (
+            TrainingData(dim=domain.space.dim, outputs=1 + len(domain.measures))
+            if state.algorithm in (*SURROGATE, AUTO)
+            else None
+        )
+        elites = {int(i) for i in state.result.data("evaluation")}
+        batch = state.pending.first if state.pending else math.inf
+        for record in records:
+            self._note(record)
+            if record.index in elites or record.index >= batch:
+                self.kept[record.index] = record
         self.summarised = -math.inf
-        self.failed = sum(not r.ok for r in records)  # evaluations that did not complete
         self.last = Snapshot(state.evaluations, state.budget, None, 0, self.failed)
         self.deadline: float | None = None
         self.cut: ProgressRow | None = None  # where a batch the deadline cut short got to
         self.progress: Callable[[Snapshot], None] = lambda s: None
+
+    def _note(self, record: EvaluationRecord) -> None:
+        """Counts a record written to the run directory (its line is the next), and keeps what a
+        surrogate learns from it."""
+        if self.training is not None and record.ok:
+            lo, hi = self.domain.spec.objective.range
+            self.training.append(
+                index=record.index,
+                line=self.written,
+                theta=record.theta,
+                targets=[record.search_objective / (hi - lo), *record.measures],
+            )
+        self.statuses[record.status.value] += 1
+
+    @property
+    def written(self) -> int:
+        """Evaluations in the run directory."""
+        return self.statuses.total()
+
+    @property
+    def failed(self) -> int:
+        """Evaluations that did not complete."""
+        return self.written - self.statuses[Status.OK.value]
 
     @classmethod
     def new(
@@ -125,11 +164,10 @@ class Search:
         state = load_state(run, trust=trust)
         if state is None:
             raise RunDirectoryError(f"{run.path} has no checkpoint.pkl; the run cannot be resumed")
-        records = run.evaluations()
         shape = occupancy_shape(domain)
-        keep = check_resumable(state, run=run, records=records, dim=domain.space.dim, grid_shape=shape)
+        keep = check_resumable(state, run=run, records=run.iter_evaluations(), dim=domain.space.dim, grid_shape=shape)
         run.truncate(keep, shape)
-        return cls(domain=domain, run=run, state=state, records=records[:keep])
+        return cls(domain=domain, run=run, state=state, records=run.iter_evaluations())
 
     @property
     def evaluated(self) -> int:
@@ -187,7 +225,7 @@ class Search:
             while not (self.done or self.out_of_time):
                 self.step(evaluator)
             self.write_summaries(self.failures())
-            self.progress(replace(self.snapshot(), evaluations=len(self.records)))
+            self.progress(replace(self.snapshot(), evaluations=self.written))
         except (Interrupted, KeyboardInterrupt) as exc:
             signum = exc.signum if isinstance(exc, Interrupted) else signal.SIGINT
             raise Interrupted(signum, run=self.run_dir.path) from None
@@ -224,7 +262,7 @@ class Search:
         jobs = [
             Job(first + i, pending.solutions[i], evaluation_seed(state.seed, first + i))
             for i in range(count)
-            if first + i not in self.records
+            if first + i not in self.kept
         ]
 
         done = [count - len(jobs)]  # of this batch, finished before (a resumed batch) or now
@@ -233,14 +271,14 @@ class Search:
             record = EvaluationRecord.of(evaluation, index=job.index, batch=batch)
             with interrupt.deferred():
                 self.run_dir.append(record, evaluation.occupancy, self.occupancy_shape)
-                self.records[job.index] = record
-            self.failed += not record.ok
+                self._note(record)
+                self.kept[job.index] = record
             done[0] += 1
             self.progress(self.snapshot(extra=done[0]))
 
         self.progress(self.snapshot(extra=done[0]))
         evaluator.run(jobs, finished, deadline=self.deadline)
-        records = [self.records[first + i] for i in range(count) if first + i in self.records]
+        records = [self.kept[first + i] for i in range(count) if first + i in self.kept]
         # Told again when a resume completes the batch: adding an elite twice changes nothing.
         self._add_to_result(records)
         summary = archives.Summary.of(state.result, self.domain.spec.objective.range)
@@ -265,6 +303,7 @@ class Search:
             self.cut = row
             return
         state.proposer.tell(self, records, pending.solutions)
+        self.kept = {int(i): self.kept[int(i)] for i in state.result.data("evaluation")}
         with interrupt.deferred():
             self.state = state = replace(
                 state, evaluations=row.evaluations, pending=None, elapsed=elapsed, progress=(*state.progress, row)
@@ -286,25 +325,18 @@ class Search:
                 evaluation=np.array([r.index for r in good]),
             )
 
-    def dataset(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def dataset(self) -> tuple[np.ndarray, np.ndarray | GridRows, np.ndarray]:
         """Training data from every successful evaluation: raw theta, occupancy grids, targets.
 
         Targets are the regularised objective over the objective's range, then the measures. Rows
         are in evaluation order, not in the order the workers finished them (the files' order),
-        so that training, and so the run, is the same whatever the number of workers.
+        so that training, and so the run, is the same whatever the number of workers. The grids
+        are read from the run directory when indexed (:class:`~hritest.search.training.GridRows`).
         """
-        lo, hi = self.domain.spec.objective.range
-        order = [r.index for r in self.run_dir.evaluations()]
-        grids = self.run_dir.occupancy(self.occupancy_shape)[: len(order)]
-        rows = sorted(
-            ((i, self.records[index]) for i, index in enumerate(order) if self.records[index].ok),
-            key=lambda row: row[1].index,
-        )
-        theta = np.array([r.theta for _, r in rows], dtype=np.float32).reshape(len(rows), -1)
-        targets = np.array([[r.search_objective / (hi - lo), *r.measures] for _, r in rows], dtype=np.float32).reshape(
-            len(rows), -1
-        )
-        return theta, grids[[i for i, _ in rows]], targets
+        theta, targets, lines = self.training.in_evaluation_order()
+        if math.prod(self.occupancy_shape) == 0:
+            return theta, np.zeros((len(theta), *self.occupancy_shape), np.float32), targets
+        return theta, GridRows(self.run_dir.occupancy(self.occupancy_shape), lines), targets
 
     def snapshot(self, extra: int = 0) -> Snapshot:
         """The last batch's snapshot, with ``extra`` evaluations of the current one finished."""
@@ -319,7 +351,7 @@ class Search:
 
     def failures(self) -> list[EvaluationRecord]:
         """The result archive's elites that meet the failure condition, worst first."""
-        return rank_failures(self.records[int(i)] for i in self.state.result.data("evaluation"))
+        return rank_failures(self.kept[int(i)] for i in self.state.result.data("evaluation"))
 
     def write_summaries(self, failures: list[EvaluationRecord]) -> None:
         self.summarised = time.monotonic()
@@ -328,7 +360,7 @@ class Search:
         cut = [asdict(self.cut)] if self.cut else []
         self.run_dir.write_csv("progress.csv", self.state.progress_rows() + cut)
         elites = sorted(
-            (self.records[int(i)] for i in self.state.result.data("evaluation")),
+            (self.kept[int(i)] for i in self.state.result.data("evaluation")),
             key=lambda r: (-r.objective, r.index),
         )
         self.run_dir.write_csv(

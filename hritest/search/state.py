@@ -13,7 +13,7 @@ and any disagreement is a :class:`RunDirectoryError` naming the file and what is
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
@@ -116,7 +116,7 @@ def load_state(run: RunDirectory, *, trust: bool = False) -> SearchState | None:
 
 
 def check_resumable(
-    state: SearchState, *, run: RunDirectory, records: Sequence[EvaluationRecord], dim: int, grid_shape: tuple[int, ...]
+    state: SearchState, *, run: RunDirectory, records: Iterable[EvaluationRecord], dim: int, grid_shape: tuple[int, ...]
 ) -> int:
     """Checks that the files a resume reads agree; returns how many evaluation lines to keep.
 
@@ -124,7 +124,7 @@ def check_resumable(
     every told one, each once, with this run's seeds, then any of the pending batch that
     finished. Lines after them are evaluations of a batch the checkpoint never saw (a run packed
     or killed in between), which the resume drops. ``occupancy.f32`` needs a record for every line
-    kept.
+    kept. ``records`` is read once, in order, and not kept (a long run's would fill the memory).
 
     Raises:
         RunDirectoryError: the first disagreement found, naming the file; nothing was changed.
@@ -144,18 +144,29 @@ def check_resumable(
             f"{checkpoint}'s pending batch does not follow its {state.evaluations} told evaluations in this "
             f"spec's {dim}-dimensional space; the checkpoint is corrupt. Start a new search"
         )
-    keep = 0
-    while keep < len(records) and records[keep].index < state.known:
-        keep += 1
-    indices = [r.index for r in records[:keep]]
-    missing = sorted(set(range(state.evaluations)) - set(indices))
-    late = [r.index for r in records[keep:] if r.index < state.known]
-    if missing or late or len(set(indices)) != keep:
+    seen = np.zeros(state.known, bool)
+    keep, twice, late, foreign, leading = 0, False, [], None, True
+    for record in records:
+        known = 0 <= record.index < state.known
+        if leading and known:
+            twice = twice or bool(seen[record.index])
+            seen[record.index] = True
+            keep += 1
+            if foreign is None and (
+                record.seed != evaluation_seed(state.seed, record.index) or len(record.theta) != dim
+            ):
+                foreign = record.index
+        else:  # past the lines the checkpoint knows of
+            leading = False
+            if known:
+                late.append(record.index)
+    missing = np.flatnonzero(~seen[: state.evaluations]).tolist()
+    if missing or late or twice:
         problem = (
             f"{_few(missing)} missing"
             if missing
             else "an evaluation is there twice"
-            if len(set(indices)) != keep
+            if twice
             else f"{_few(late)} after evaluations of a later batch"
         )
         raise RunDirectoryError(
@@ -163,12 +174,11 @@ def check_resumable(
             "The file was shortened, edited or written by two searches at once; the run cannot be resumed. "
             "Restore the file, or start a new search"
         )
-    for record in records[:keep]:
-        if record.seed != evaluation_seed(state.seed, record.index) or len(record.theta) != dim:
-            raise RunDirectoryError(
-                f"{lines}: evaluation {record.index} is not one of this run's (its seed or theta's size differs "
-                f"from what run seed {state.seed} and the spec give); the run cannot be resumed. Start a new search"
-            )
+    if foreign is not None:
+        raise RunDirectoryError(
+            f"{lines}: evaluation {foreign} is not one of this run's (its seed or theta's size differs "
+            f"from what run seed {state.seed} and the spec give); the run cannot be resumed. Start a new search"
+        )
     size = int(np.prod(grid_shape)) * np.dtype(np.float32).itemsize
     grids = run.path / "occupancy.f32"
     stored = grids.stat().st_size if grids.exists() else 0

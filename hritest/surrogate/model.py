@@ -123,14 +123,15 @@ class Surrogate:
         if rows is not None:
             index = torch.as_tensor(rows, dtype=torch.long, device=self.device)
             x, y = x[index], y[index]
-            occupancy = None if occupancy is None or self.occupancy is None else np.asarray(occupancy)[rows]
+            # Indexed before converting: a run's grids are read from disk only for these rows.
+            occupancy = None if occupancy is None or self.occupancy is None else np.asarray(occupancy[rows])
         batch = min(self.batch_size, len(x))  # the paper's first round has 100 samples
 
         occupancy_loss, predicted = math.nan, None
         halfway = None if deadline is None else (time.monotonic() + deadline) / 2
         if self.occupancy is not None:
             kl = nn.KLDivLoss(reduction="batchmean")
-            grids = torch.as_tensor(occupancy, dtype=torch.float32, device=self.device)
+            grids = torch.as_tensor(np.asarray(occupancy), dtype=torch.float32, device=self.device)
             self.occupancy.train()
             occupancy_loss = self._epochs(
                 generator,
