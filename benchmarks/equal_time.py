@@ -2,7 +2,7 @@
 
     python benchmarks/equal_time.py specs/collab.yaml --minutes 5,15 --seeds 3 \\
         [--algorithms random,map_elites,cma_mae,sas,dsas,auto] [--inner-iterations 300] \\
-        [--workers 2] [--device cpu] [--out DIR]
+        [--training incremental] [--inner-stall 50] [--workers 2] [--device cpu] [--out DIR]
 
 A user has a CI budget or an afternoon, not an evaluation count, so this is the comparison that
 decides what they should run. Each run is one ``hritest search --time-limit`` of the longest mark,
@@ -73,7 +73,12 @@ def run_for(run: Path, *, spec: Path, algorithm: str, seed: int, seconds: float,
         time_limit=seconds,
         seed=seed,
         backend=backend,
-        surrogate=qd.SurrogateOptions(inner_iterations=args.inner_iterations, device=args.device),
+        surrogate=qd.SurrogateOptions(
+            inner_iterations=args.inner_iterations,
+            device=args.device,
+            training=args.training,
+            inner_stall=args.inner_stall,
+        ),
     )
 
 
@@ -84,6 +89,8 @@ def main() -> None:
     parser.add_argument("--minutes", default="5,15", help="the marks, comma-separated; runs last the longest")
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--inner-iterations", type=int, default=300, help="SAS and DSAS (auto sizes its own)")
+    parser.add_argument("--training", choices=["paper", "incremental"], default=None, help="default: the spec's")
+    parser.add_argument("--inner-stall", type=int, default=None, help="SAS and DSAS; default: the spec's")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--out", type=Path, default=None)
@@ -111,7 +118,8 @@ def main() -> None:
     header += [f"evaluations at {marks[-1]:g} min", "proposing share"]
     lines = [
         f"{args.spec.name}: equal wall time, {args.workers} workers, seeds 0-{args.seeds - 1}, SAS/DSAS inner "
-        f"iterations {args.inner_iterations:,}",
+        f"iterations {args.inner_iterations:,}, training {args.training or 'as the spec'}, inner stall "
+        f"{args.inner_stall or 'as the spec'}",
         "",
         "| " + " | ".join(header) + " |",
         "|" + "---|" * len(header),
