@@ -37,7 +37,9 @@ SURROGATE = ("sas", "dsas")
 AUTO = "auto"
 # progress.csv, archive.csv and failures.yaml are rewritten at most this often (and at the end):
 # between batches the workers wait, so the loop does only what resuming needs (the checkpoint).
+# A long run's summaries take longer to write: then at most every SUMMARY_SHARE of the time.
 SUMMARY_SECONDS = 5.0
+SUMMARY_SHARE = 0.02
 ALGORITHMS = (*algorithms.MODEL_FREE, *SURROGATE, AUTO)
 ERROR_LOG = "error.log"  # the traceback of a bug in hritest that stopped the search
 
@@ -92,6 +94,8 @@ class Search:
             if record.index in elites or record.index >= batch:
                 self.kept[record.index] = record
         self.summarised = -math.inf
+        self.summary_every = SUMMARY_SECONDS
+        self.clock = (time.monotonic(), state.elapsed)  # (when, the run's wall time then)
         self.last = Snapshot(state.evaluations, state.budget, None, 0, self.failed)
         self.deadline: float | None = None
         self.cut: ProgressRow | None = None  # where a batch the deadline cut short got to
@@ -221,6 +225,7 @@ class Search:
                 directory, whose path the exception holds as ``traceback_file``.
         """
         self.deadline, self.progress = deadline, progress
+        self.clock = (time.monotonic(), self.state.elapsed)
         try:
             while not (self.done or self.out_of_time):
                 self.step(evaluator)
@@ -283,7 +288,7 @@ class Search:
         self._add_to_result(records)
         summary = archives.Summary.of(state.result, self.domain.spec.objective.range)
         failures = self.failures()
-        elapsed = state.elapsed + time.monotonic() - started
+        elapsed = self.wall_time
         row = ProgressRow(
             evaluations=state.evaluations + len(records),
             batch=batch,
@@ -309,7 +314,7 @@ class Search:
                 state, evaluations=row.evaluations, pending=None, elapsed=elapsed, progress=(*state.progress, row)
             )
             self.run_dir.save_checkpoint(state)
-        if time.monotonic() - self.summarised >= SUMMARY_SECONDS:
+        if time.monotonic() - self.summarised >= self.summary_every:
             self.write_summaries(failures)
         self.last = replace(self.last, evaluations=state.evaluations, summary=summary, failures=len(failures))
         self.progress(self.snapshot())
@@ -353,8 +358,19 @@ class Search:
         """The result archive's elites that meet the failure condition, worst first."""
         return rank_failures(self.kept[int(i)] for i in self.state.result.data("evaluation"))
 
+    @property
+    def wall_time(self) -> float:
+        """The run's wall time: its earlier sessions' and this one's, everything included."""
+        since, before = self.clock
+        return before + time.monotonic() - since
+
     def write_summaries(self, failures: list[EvaluationRecord]) -> None:
+        started = time.monotonic()
+        self._write_summaries(failures)
         self.summarised = time.monotonic()
+        self.summary_every = max(SUMMARY_SECONDS, (self.summarised - started) / SUMMARY_SHARE)
+
+    def _write_summaries(self, failures: list[EvaluationRecord]) -> None:
         names = [m.name for m in self.domain.measures]
         labels = self.domain.space.labels
         cut = [asdict(self.cut)] if self.cut else []
@@ -378,7 +394,7 @@ class Search:
         )
         self.run_dir.write_text(
             "failures.yaml",
-            yaml.safe_dump(
+            yaml.dump(
                 {
                     "spec": self.run_dir.meta.get("spec_file"),
                     "failure": self.domain.spec.failure,
@@ -397,6 +413,7 @@ class Search:
                     ],
                 },
                 sort_keys=False,
+                Dumper=getattr(yaml, "CSafeDumper", yaml.SafeDumper),  # libyaml's, when PyYAML has it: twice as fast
             ),
         )
 
