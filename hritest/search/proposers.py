@@ -58,6 +58,11 @@ class ModelFree:
     def __init__(self, scheduler) -> None:  # noqa: ANN001 - ribs Scheduler
         self.scheduler = scheduler
 
+    @property
+    def batch_size(self) -> int:
+        """Solutions per ask: every emitter's batch."""
+        return sum(emitter.batch_size for emitter in self.scheduler.emitters)
+
     def ask(self, search: SearchView) -> np.ndarray:
         return self.scheduler.ask()
 

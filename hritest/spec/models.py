@@ -403,8 +403,8 @@ class SurrogateSettings(Strict):
 class SearchSpec(Strict):
     algorithm: Literal["random", "map_elites", "cma_mae", "sas", "dsas", "auto"] = Field(
         "dsas",
-        description="auto measures, during the run, which of random, cma_mae and sas gains the most QD-score "
-        "per second, and spends the time there",
+        description="auto measures, during the run, which of random, map_elites, cma_mae and sas gains the most "
+        "QD-score per second, and spends the time there",
     )
     budget: Annotated[int, Field(gt=0, le=1_000_000_000, strict=True)] = 10_000
     seed: Count = Field(
