@@ -1,7 +1,7 @@
 """Every algorithm for the same wall time: QD-score at each mark, over the best model-free one.
 
     python benchmarks/equal_time.py specs/collab.yaml --minutes 5,15 --seeds 3 \\
-        [--algorithms random,map_elites,cma_mae,sas,dsas,auto] [--inner-iterations 300] \\
+        [--algorithms random,map_elites,cma_mae:1,sas,dsas,auto] [--inner-iterations 300] \\
         [--training incremental] [--inner-stall 50] [--workers 2] [--device cpu] [--out DIR]
 
 A user has a CI budget or an afternoon, not an evaluation count, so this is the comparison that
@@ -12,6 +12,8 @@ time spent proposing and simulating, without the process's start-up). Prints a M
 each algorithm's QD-score at every mark (mean ± standard error over seeds), its ratio to the best
 model-free algorithm's mean at that mark, its evaluations, and the share of its time spent
 proposing (for SAS and DSAS: training the surrogate and its inner loop); writes it into ``--out``.
+``name:N`` in ``--algorithms`` runs that algorithm for seeds 0 to N-1 only (one far behind the
+others needs no three seeds to say so).
 
 A stopped comparison continues: the same command with the same ``--out`` reuses every run that
 reached the longest mark and resumes a shorter one for the time it lacks.
@@ -95,13 +97,17 @@ def main() -> None:
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args()
-    algorithms = [a.strip() for a in args.algorithms.split(",") if a.strip()]
+    seeds = {}
+    for item in filter(None, (a.strip() for a in args.algorithms.split(","))):
+        name, _, count = item.partition(":")
+        seeds[name] = int(count) if count else args.seeds
+    algorithms = list(seeds)
     marks = sorted(float(m) for m in args.minutes.split(","))
     out = args.out or Path("benchmark-runs") / f"equal-time-{args.spec.stem}-{time.strftime('%Y%m%d-%H%M%S')}"
 
     rows: dict[str, list[list[dict[str, float]]]] = {a: [] for a in algorithms}
-    for seed in range(args.seeds):
-        for algorithm in algorithms:
+    for seed in range(max(seeds.values())):
+        for algorithm in (a for a in algorithms if seed < seeds[a]):
             run = out / f"{algorithm}-s{seed}"
             run_for(run, spec=args.spec, algorithm=algorithm, seed=seed, seconds=60 * marks[-1], args=args)
             rows[algorithm].append(progress(run))
@@ -117,7 +123,7 @@ def main() -> None:
         header += [f"QD-score at {m:g} min", "/ best model-free"]
     header += [f"evaluations at {marks[-1]:g} min", "proposing share"]
     lines = [
-        f"{args.spec.name}: equal wall time, {args.workers} workers, seeds 0-{args.seeds - 1}, SAS/DSAS inner "
+        f"{args.spec.name}: equal wall time, {args.workers} workers, SAS/DSAS inner "
         f"iterations {args.inner_iterations:,}, training {args.training or 'as the spec'}, inner stall "
         f"{args.inner_stall or 'as the spec'}",
         "",

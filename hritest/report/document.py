@@ -168,14 +168,15 @@ def _glance(data: RunData) -> list:
     ]
     blocks: list = [Table(["", ""], [[k, v] for k, v in rows])]
     if data.auto is not None:
-        columns = ["batches", "evaluations", "seconds", "time_share", "qd_score_gained", "recent_rate"]
+        columns = ["stints", "evaluations", "seconds", "time_share", "qd_score_gained", "recent_rate", "score"]
         blocks.append(
             Table(
                 ["auto: arm", *columns],
-                [[arm, *(_format(row[c]) for c in columns)] for arm, row in data.auto["arms"].items()],
-                caption="Where --algorithm auto spent the time: each batch goes to the arm with the best recent "
-                "QD-score per second (recent_rate), a losing arm is measured again now and then; every "
-                "choice and its measurements are in auto.json",
+                [[arm, *(_format(row.get(c, "")) for c in columns)] for arm, row in data.auto["arms"].items()],
+                caption="Where --algorithm auto spent the time: each stint of a few seconds goes to the arm "
+                "with the best recent score (its QD-score per second over the search's pace just before), "
+                "a losing arm is measured again now and then, in at most 8% of the run; every choice and "
+                "its measurements are in auto.json",
             )
         )
     if data.surrogate is not None:

@@ -119,9 +119,9 @@ def start(
 def _run(search: Search, evaluator: Evaluator, progress: Callable[[Snapshot], None], deadline: float | None) -> None:
     """Runs the search to its end, and says in ``run.json`` why it stopped."""
     search.run(evaluator, progress, deadline=deadline)
-    summary = getattr(search.state.proposer, "summary", None)  # auto's: where the time went
+    write_log = getattr(search.state.proposer, "write_log", None)  # auto's: where the time went, and why
     search.run_dir.update_meta(
-        stopped="budget" if search.done else "time limit", **({"auto": summary()} if summary else {})
+        stopped="budget" if search.done else "time limit", **({"auto": write_log(search.run_dir)} if write_log else {})
     )
 
 

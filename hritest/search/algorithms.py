@@ -52,8 +52,9 @@ def sigma0(domain: Domain) -> float:
     return float(np.exp(np.mean(np.log(widths[widths > 0])))) / 6 if np.any(widths > 0) else 1.0
 
 
-def scheduler(domain: Domain, algorithm: str, archive, *, seed: int) -> Scheduler:  # noqa: ANN001 - a ribs archive
-    """The pyribs scheduler of a model-free ``algorithm`` over the search ``archive``."""
+def scheduler(domain: Domain, algorithm: str, archive, *, seed: int, starts: np.ndarray | None = None) -> Scheduler:  # noqa: ANN001 - a ribs archive
+    """The pyribs scheduler of a model-free ``algorithm`` over the search ``archive``; CMA-MAE's
+    emitters start at :func:`x0`, or each at its row of ``starts``."""
     search = domain.spec.search
     seeds = np.random.SeedSequence(seed).generate_state(search.emitter.emitters + 1)
     if algorithm == "random":
@@ -83,7 +84,7 @@ def scheduler(domain: Domain, algorithm: str, archive, *, seed: int) -> Schedule
         emitters = [
             EvolutionStrategyEmitter(
                 archive,
-                x0=x0(domain),
+                x0=x0(domain) if starts is None else starts[i],
                 sigma0=sigma0(domain),
                 ranker="imp",
                 selection_rule="mu",
@@ -91,7 +92,7 @@ def scheduler(domain: Domain, algorithm: str, archive, *, seed: int) -> Schedule
                 batch_size=settings.batch_size,
                 seed=int(s),
             )
-            for s in seeds[1:]
+            for i, s in enumerate(seeds[1:])
         ]
     else:
         raise ValueError(f"{algorithm!r} is not a model-free algorithm; those are {', '.join(MODEL_FREE)}")

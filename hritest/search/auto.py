@@ -4,23 +4,34 @@ Which algorithm finds the most failures per minute depends on the domain: where 
 simulates in milliseconds, training and searching a surrogate costs thousands of simulations and
 model-free CMA-MAE wins; where it takes seconds, the surrogate's better-chosen proposals pay for
 it. The paper says as much, and measurements on the bundled domains agree. ``auto`` does not
-guess: it treats Random, MAP-Elites, CMA-MAE and SAS as the arms of a bandit and measures each
-batch's *QD-score gained per wall second* (proposing and simulating it, on this machine, with
-these workers). Every rate falls as the archive fills, so a rate measured early says little about
-now: each batch's rate is divided by the *pace* of the search just before it (the rate of the
-last :data:`PACE` batches, whatever proposed them), and arms are compared by that relative rate.
-Every batch goes to the arm with the best recent relative rate, except that a losing arm is
-tried again once the others have had :data:`PATIENCE` times its last batch's time, a patience
-that doubles each time it loses again (so exploring costs a shrinking share of the run). All arms
-share what is simulated: SAS trains on every evaluation, and the model-free arms share one
-archive, which receives SAS's evaluations too.
+guess: it treats Random, MAP-Elites, CMA-MAE and SAS as the arms of a bandit and measures the
+*QD-score gained per wall second* of each (proposing and simulating, on this machine, with these
+workers).
 
-SAS runs here with the schedule whose cost follows its data (incremental training, an inner loop
-that stops when its archive stalls), and each outer iteration is given as much time as simulating
-its batch takes, so that the surrogate never takes more than about half of the run.
+* **Stints, not batches.** An arm runs for a stint of at least a second and 3 % of the run so
+  far (and at least one of its batches; a first stint, :data:`WARMUP`): a 20-scenario batch that
+  fills one cell more or less than the last says nothing. CMA-MAE, joining a search that others
+  began, starts its emitters at the search's elites rather than at the spec's ``x0``.
+* **Relative rates.** Every rate falls as the archive fills, so a rate measured a minute ago says
+  little about now: a stint's gain is compared with what the search's *pace* around it (its rate
+  over the :data:`PACE` quanta of time before the stint and, once the search has gone on as long,
+  after it) would have gained in the same seconds, and an arm's score is that ratio over its last
+  :data:`WINDOW` stints.
+* **Exploring costs a bounded share.** Each stint goes to the arm with the best score, except
+  that arms never measured are measured first, one at a time and the cheapest first, and a losing
+  arm again once the others have had :data:`PATIENCE` times its last stint (a patience that
+  doubles each time it loses again); both only while measuring arms other than the best has taken
+  at most :data:`EXPLORE` of the run. With a time limit, that share is of the limit, from the
+  start: the sooner the best arm is known, the longer it runs.
 
-Every batch's measurement and the choice behind it go to ``auto.json`` in the run directory, and
-a summary per arm to ``run.json`` at the end.
+All arms share what is simulated: SAS trains on every evaluation, and the model-free arms share one
+archive, which receives SAS's evaluations too. SAS runs here with the schedule whose cost follows
+its data (incremental training, an inner loop that stops when its archive stalls), and each outer
+iteration is given as much time as simulating its batch takes, so that the surrogate never takes
+more than about half of its stint.
+
+Every batch's measurement and the choice behind it go to ``auto.json`` in the run directory (at
+each stint's end), and a summary per arm to ``run.json`` at the end.
 """
 
 from __future__ import annotations
@@ -34,34 +45,45 @@ import numpy as np
 
 from hritest.domain import Domain
 from hritest.records import EvaluationRecord
+from hritest.rundir import RunDirectory
 from hritest.search import algorithms, archives
 from hritest.search.proposers import ModelFree, SearchView, SurrogateAssisted, SurrogateOptions
 
 ARMS = ("random", "map_elites", "cma_mae", "sas")
-PATIENCE = 4.0  # a losing arm waits this many times its last batch's seconds, doubled per loss
+PATIENCE = 4.0  # a losing arm waits this many times its last stint's seconds, doubled per loss
 MAX_PATIENCE = 256.0
-WINDOW = 2  # an arm's score: its mean relative rate over its last WINDOW batches
-PACE = 3  # a batch's rate is relative to that of the PACE batches before it
+EXPLORE = 0.08  # at most this share of the run measures arms other than the best
+MIN_STINT = 1.0  # seconds: a stint lasts at least this long (and one batch of its arm)
+STINT_SHARE = 0.03  # and this share of the run so far
+WARMUP = 3  # an arm's first stint lasts at least this many of its batches
+WINDOW = 2  # an arm's score: its gain over the pace's, in its last WINDOW stints
+PACE = 3  # the pace: the search's rate over the last PACE stints' worth of time
 STALL = 50  # SAS's inner loop stops when its archive has not grown in this many iterations
 FILE = "auto.json"
 
 
 @dataclass(frozen=True, kw_only=True)
 class Batch:
-    """One batch's measurement: what proposed it, why, and what it cost and gained."""
+    """One batch's measurement: what proposed it, in which stint, why, and what it cost and gained."""
 
     batch: int
+    stint: int
     arm: str
     reason: str
     evaluations: int
     seconds: float  # wall time to propose and simulate it
     gain: float  # QD-score gained
-    rates: dict[str, float]  # every measured arm's score (relative rate) when the choice was made
-    relative: float = 1.0  # its rate over the pace of the search before it
+    pace: float = 0.0  # the search's QD-score per second over the time before its stint
+    rates: dict[str, float]  # every measured arm's score when its stint began
 
     @property
     def rate(self) -> float:
         return self.gain / max(self.seconds, 1e-9)
+
+    @property
+    def relative(self) -> float:
+        """Its gain over what the pace before its stint would have gained in its seconds."""
+        return _ratio(self.gain, self.pace * self.seconds)
 
 
 class Auto:
@@ -69,6 +91,7 @@ class Auto:
 
     def __init__(self, domain: Domain, *, seed: int, options: SurrogateOptions) -> None:
         shared = archives.search_archive(domain, seed=seed)
+        self.seed, self.shared = seed, shared
         self.arms = {
             "random": ModelFree(algorithms.scheduler(domain, "random", shared, seed=seed)),
             "map_elites": ModelFree(algorithms.scheduler(domain, "map_elites", shared, seed=seed)),
@@ -89,6 +112,11 @@ class Auto:
         self.patience = dict.fromkeys(ARMS, PATIENCE)
         self.choice: str | None = None
         self.reason = ""
+        self.stint = -1
+        self.spent = 0.0  # seconds of every batch so far
+        self.stint_seconds = 0.0  # of the current stint's batches
+        self.stint_batches = 0
+        self.stint_pace = 0.0  # the search's pace before the current stint
         self.rates: dict[str, float] = {}
         self.asked: tuple[float, float] | None = None  # (time.monotonic(), QD-score) at the ask
 
@@ -98,8 +126,17 @@ class Auto:
         return {**self.__dict__, "asked": None}
 
     def ask(self, search: SearchView) -> np.ndarray:
-        self.choice, self.reason = self._choose(search)
-        self.rates = {arm: round(self.score(arm), 4) for arm in ARMS if self._batches(arm)}
+        if not self._continues(search):
+            if self.history:
+                self._end_stint()
+                self.write_log(search.run_dir)
+            self.choice, self.reason = self._choose(search)
+            self.stint += 1
+            self.stint_seconds, self.stint_batches = 0.0, 0
+            self.stint_pace = self._pace(len(self.history), before=True)
+            if self.choice == "cma_mae" and not self._batches("cma_mae"):
+                self._start_cma_mae(search.domain)
+            self.rates = {arm: round(self.score(arm), 4) for arm in ARMS if self._batches(arm)}
         self.asked = (time.monotonic(), search.qd_score)
         if self.choice == "sas":
             return self.arms["sas"].ask(search, seconds=self._simulation_seconds())
@@ -108,90 +145,168 @@ class Auto:
     def tell(self, search: SearchView, records: list[EvaluationRecord], solutions: np.ndarray) -> None:
         self.arms[self.choice].tell(search, records, solutions)
         if self.choice == "sas":  # the model-free arms share one archive: it learns of these too
-            self.arms["cma_mae"].observe(search, records, solutions)
+            self.arms["random"].observe(search, records, solutions)
         if self.asked is not None:
             started, score = self.asked
-            batch = Batch(
-                batch=len(self.history) + 1,
-                arm=self.choice,
-                reason=self.reason,
-                evaluations=len(records),
-                seconds=round(time.monotonic() - started, 4),
-                gain=search.qd_score - score,
-                rates=self.rates,
+            seconds = time.monotonic() - started
+            self.spent += seconds
+            self.stint_seconds += seconds
+            self.stint_batches += 1
+            self.history.append(
+                Batch(
+                    batch=len(self.history) + 1,
+                    stint=self.stint,
+                    arm=self.choice,
+                    reason=self.reason,
+                    evaluations=len(records),
+                    seconds=round(seconds, 4),
+                    gain=search.qd_score - score,
+                    pace=self.stint_pace,
+                    rates=self.rates,
+                )
             )
-            before = self.history[-PACE:]
-            pace = sum(b.gain for b in before) / max(sum(b.seconds for b in before), 1e-9) if before else batch.rate
-            self.history.append(replace(batch, relative=batch.rate / pace if pace > 0 else float(batch.rate > 0)))
-            self._update_patience()
         self.asked = None
-        search.run_dir.write_text(FILE, json.dumps(self.summary() | {"batches": self._log()}, indent=1))
+
+    def write_log(self, run_dir: RunDirectory) -> dict:
+        """Writes every batch's measurement and choice to ``auto.json`` (at each stint's end and the
+        run's: rewriting it after every batch would cost a long run more than its choices); returns
+        the summary per arm."""
+        summary = self.summary()
+        run_dir.write_text(FILE, json.dumps(summary | {"batches": self._log()}, indent=1))
+        return summary
 
     # --- the choice ---------------------------------------------------------------------------
 
     def score(self, arm: str) -> float:
-        """``arm``'s mean relative rate over its last :data:`WINDOW` batches: what decides."""
-        recent = self._batches(arm)[-WINDOW:]
-        return sum(b.relative for b in recent) / len(recent)
+        """``arm``'s gain in its last :data:`WINDOW` stints over what the search's pace would have
+        gained in their seconds: what decides. The pace of a stint is that before it, or, once
+        the search has gone on for as long, the geometric mean of the paces before and after it:
+        rates fall fast early on, and a stint compared with the pace before it alone would look
+        worse the longer it lasted."""
+        gain = expected = 0.0
+        for stint in self._stints(arm)[-WINDOW:]:
+            before = stint[0].pace
+            after = self._pace(stint[-1].batch, before=False)
+            pace = math.sqrt(before * after) if after is not None and before > 0 and after > 0 else before
+            gain += sum(b.gain for b in stint)
+            expected += pace * sum(b.seconds for b in stint)
+        return _ratio(gain, expected)
 
     def rate(self, arm: str) -> float:
-        """QD-score gained per second by ``arm`` over its last :data:`WINDOW` batches."""
-        recent = self._batches(arm)[-WINDOW:]
+        """QD-score gained per second by ``arm`` in its last :data:`WINDOW` stints."""
+        recent = [b for stint in self._stints(arm)[-WINDOW:] for b in stint]
         return sum(b.gain for b in recent) / max(sum(b.seconds for b in recent), 1e-9)
 
+    def quantum(self) -> float:
+        """How long a stint lasts at least: :data:`MIN_STINT`, and :data:`STINT_SHARE` of the run
+        so far (and one batch of its arm)."""
+        return max(MIN_STINT, STINT_SHARE * self.spent)
+
+    def _continues(self, search: SearchView) -> bool:
+        """Whether the current stint goes on: it has lasted less than a quantum, or is a first
+        measurement of fewer than :data:`WARMUP` batches (CMA-ES adapts over generations, and an
+        arm's first batch in an archive that others filled says little of its next ones)."""
+        if self.stint_batches == 0 or not self._fits(search, self.choice):
+            return False
+        warming = self.reason == "first measurement" and self.stint_batches < WARMUP
+        return warming or self.stint_seconds < self.quantum()
+
+    def _start_cma_mae(self, domain: Domain) -> None:
+        """CMA-MAE joins a search that others began: its emitters start at elites the search has
+        found, one each, rather than all at the spec's ``x0``."""
+        emitters = domain.spec.search.emitter.emitters
+        starts = self.shared.sample_elites(emitters)["solution"] if not self.shared.empty else None
+        self.arms["cma_mae"] = ModelFree(
+            algorithms.scheduler(domain, "cma_mae", self.shared, seed=self.seed, starts=starts)
+        )
+
     def _choose(self, search: SearchView) -> tuple[str, str]:
-        surrogate_ready = search.evaluated >= self.initial
-        spent = sum(b.seconds for b in self.history)
-        for arm in ARMS:  # each arm once, SAS once there is data to train on
-            if not self._batches(arm) and (arm != "sas" or surrogate_ready):
-                # An arm never measured is a loser too: it waits until the run has spent
-                # PATIENCE times what its first batch should cost (a CMA-MAE batch of slow scenarios
-                # is not worth a short run's first minute).
-                if self.history and spent < PATIENCE * self._expected_seconds(arm):
-                    continue
-                if arm == "sas" and not self._fits(search, arm):
-                    continue
-                return arm, "first measurement"
+        if not self.history:
+            return ARMS[0], "first measurement"
+        spent = self.spent
+        explored = sum(b.seconds for b in self.history if b.reason != "best rate" and b.stint > 0)
+        # With a time limit, exploring may take its share of the whole run from the start: the
+        # sooner the best arm is known, the longer it runs.
+        horizon = spent + (search.seconds_left if math.isfinite(search.seconds_left) else 0.0)
         measured = [arm for arm in ARMS if self._batches(arm)]
         best = max(measured, key=self.score)
+        # Arms never measured go first, the cheapest first, and SAS last: it needs data to train
+        # on, and its first round costs the most.
+        unmeasured = sorted((arm for arm in ARMS[:-1] if arm not in measured), key=self._expected_seconds)
+        if "sas" not in measured and search.evaluated >= self.initial:
+            unmeasured.append("sas")
         stale = [
-            arm
-            for arm in measured
-            if arm != best and self._since(arm) >= self.patience[arm] * self._batches(arm)[-1].seconds
+            (arm, f"re-measure (best: {best})")
+            for arm in sorted(measured, key=self._since, reverse=True)
+            if arm != best and self._since(arm) >= self.patience[arm] * self._last_stint_seconds(arm)
         ]
-        for arm in sorted(stale, key=self._since, reverse=True):
-            if self._fits(search, arm):
-                return arm, f"re-measure (best: {best})"
+        # Measured in that order, the first that the exploring share allows.
+        for arm, reason in [(arm, "first measurement") for arm in unmeasured] + stale:
+            cost = self._expected_seconds(arm)
+            if explored + cost <= EXPLORE * max(horizon, spent + cost) and self._fits(search, arm):
+                return arm, reason
         return best, "best rate"
 
+    def _end_stint(self) -> None:
+        """After a stint that measured a losing arm: if it still loses, it waits twice as long; an
+        arm that comes out best waits the least when it loses again."""
+        stint = [b for b in self.history if b.stint == self.stint]
+        if not stint or stint[0].reason == "first measurement":
+            return
+        arm = stint[0].arm
+        others = [self.score(other) for other in ARMS if other != arm and self._batches(other)]
+        if others and self.score(arm) >= max(others):
+            self.patience[arm] = PATIENCE
+        elif stint[0].reason.startswith("re-measure"):
+            self.patience[arm] = min(2 * self.patience[arm], MAX_PATIENCE)
+
     def _fits(self, search: SearchView, arm: str) -> bool:
-        """Whether ``arm``'s last batch would end before the time limit (SAS's ask cannot be cut)."""
+        """Whether ``arm``'s next batch would end before the time limit (SAS's ask cannot be cut)."""
         last = self._batches(arm)
         seconds = last[-1].seconds if last else self._expected_seconds(arm)
         return arm != "sas" or seconds <= search.seconds_left
 
     def _expected_seconds(self, arm: str) -> float:
-        """What a first batch of ``arm`` should take: its size at the recent seconds per evaluation
-        (SAS: as long again for its training and inner loop)."""
+        """What a stint of ``arm`` should take: a quantum, or one of its batches if longer (as long
+        as its last one). A first one: :data:`WARMUP` batches of its size at the recent seconds
+        per evaluation (for SAS, as long again for training and inner loop)."""
+        if done := self._batches(arm):
+            return max(self.quantum(), done[-1].seconds)
         if arm == "sas":
-            return 2 * self._simulation_seconds()
-        return self.arms[arm].batch_size * self._seconds_per_evaluation()
+            batch = 2 * self._simulation_seconds()
+        else:
+            batch = self.arms[arm].batch_size * self._seconds_per_evaluation()
+        return max(self.quantum(), WARMUP * batch)
+
+    def _pace(self, index: int, *, before: bool) -> float | None:
+        """The search's QD-score gained per second over the last :data:`PACE` quanta of time
+        before ``history[index]`` (all of it, early on), or over as long after ``history[index - 1]``
+        (None until the search has gone on for that long)."""
+        window, gain, seconds = PACE * self.quantum(), 0.0, 0.0
+        batches = reversed(self.history[:index]) if before else iter(self.history[index:])
+        for b in batches:
+            if seconds >= window:
+                break
+            gain, seconds = gain + b.gain, seconds + b.seconds
+        if not before and seconds < window:
+            return None
+        return gain / seconds if seconds > 0 else 0.0
 
     def _since(self, arm: str) -> float:
         """Seconds the other arms have had since ``arm``'s last batch."""
         last = self._batches(arm)[-1].batch
         return sum(b.seconds for b in self.history[last:])
 
-    def _update_patience(self) -> None:
-        """A re-measured arm that still loses waits twice as long; one that wins waits the least."""
-        latest = self.history[-1]
-        others = [self.score(arm) for arm in ARMS if arm != latest.arm and self._batches(arm)]
-        if not others or latest.reason == "first measurement":
-            return
-        if self.score(latest.arm) >= max(others):
-            self.patience[latest.arm] = PATIENCE
-        elif latest.reason.startswith("re-measure"):
-            self.patience[latest.arm] = min(2 * self.patience[latest.arm], MAX_PATIENCE)
+    def _last_stint_seconds(self, arm: str) -> float:
+        last = self._batches(arm)[-1].stint
+        return sum(b.seconds for b in self.history if b.stint == last)
+
+    def _stints(self, arm: str) -> list[list[Batch]]:
+        """``arm``'s stints, each its batches, in order."""
+        stints: dict[int, list[Batch]] = {}
+        for b in self._batches(arm):
+            stints.setdefault(b.stint, []).append(b)
+        return list(stints.values())
 
     def _simulation_seconds(self) -> float:
         """What simulating a surrogate batch should take: its last size (at first, 100) at the
@@ -202,10 +317,13 @@ class Auto:
     def _seconds_per_evaluation(self) -> float:
         """The model-free arms' recent wall seconds per evaluation (proposing costs them next to
         nothing: this is what simulating one costs, with these workers)."""
-        recent = [b for b in self.history if b.arm != "sas"][-2 * WINDOW :]
-        if not recent:
-            return math.inf
-        return sum(b.seconds for b in recent) / max(sum(b.evaluations for b in recent), 1)
+        recent, seconds, evaluations = PACE * self.quantum(), 0.0, 0
+        for b in reversed(self.history):
+            if b.arm != "sas":
+                seconds, evaluations = seconds + b.seconds, evaluations + b.evaluations
+            if seconds >= recent:
+                break
+        return seconds / evaluations if evaluations else math.inf
 
     def _batches(self, arm: str) -> list[Batch]:
         return [b for b in self.history if b.arm == arm]
@@ -213,11 +331,13 @@ class Auto:
     # --- what it tells the user ---------------------------------------------------------------
 
     def summary(self) -> dict:
-        """Per arm: batches, evaluations, seconds and their share, QD-score gained, the recent rate."""
-        total = sum(b.seconds for b in self.history) or 1.0
+        """Per arm: stints, batches, evaluations, seconds and their share, QD-score gained, the
+        recent rate and score."""
+        total = self.spent or 1.0
         return {
             "arms": {
                 arm: {
+                    "stints": len({b.stint for b in done}),
                     "batches": len(done),
                     "evaluations": sum(b.evaluations for b in done),
                     "seconds": round(sum(b.seconds for b in done), 3),
@@ -232,4 +352,14 @@ class Auto:
         }
 
     def _log(self) -> list[dict]:
-        return [asdict(b) | {"rate": round(b.rate, 4), "relative": round(b.relative, 4)} for b in self.history]
+        return [
+            asdict(b) | {"pace": round(b.pace, 4), "rate": round(b.rate, 4), "relative": round(b.relative, 4)}
+            for b in self.history
+        ]
+
+
+def _ratio(gain: float, expected: float) -> float:
+    """Gain over expected gain; when the pace was nil, any gain counts as keeping pace."""
+    if expected > 0:
+        return gain / expected
+    return 1.0 if gain > 0 else 0.0

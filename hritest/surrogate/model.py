@@ -104,9 +104,10 @@ class Surrogate:
         """One round of training (batches of ``batch_size``, last partial dropped): on every sample,
         or only on ``rows`` of them (the networks keep what earlier rounds taught them).
 
-        With ``deadline`` (a ``time.monotonic()`` value), each network stops after the epoch in
-        which its share of the time ran out (the occupancy network's is the first half): a round
-        then costs what the caller can spend, and the warm networks learn the rest later.
+        With ``deadline`` (a ``time.monotonic()`` value), each network stops at the first batch
+        after its share of the time ran out (the occupancy network's is the first half), even in
+        the middle of an epoch: a round then costs what the caller can spend, and the warm
+        networks learn the rest later.
 
         ``occupancy`` is ``(samples, channels, 32, 32)``; without grids it is not read (None, or
         the ``(samples, 0, 32, 32)`` array a run directory gives). The targets are standardised
@@ -173,6 +174,8 @@ class Surrogate:
             order = torch.randperm(n, generator=generator).to(self.device)
             losses = []
             for start in range(0, n - batch + 1, batch):
+                if deadline is not None and losses and time.monotonic() >= deadline:
+                    break  # thousands of new samples are an epoch longer than the time given
                 loss = loss_of(order[start : start + batch])
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()

@@ -5,51 +5,75 @@ from __future__ import annotations
 import csv
 import json
 
+import numpy as np
 from typer.testing import CliRunner
 
 from hritest import search as qd
 from hritest.cli import app
 from hritest.rundir import RunDirectory
+from hritest.search import algorithms, auto
 from hritest.search.auto import ARMS
 
 runner = CliRunner()
 TWO = qd.Backend(workers=2, timeout=20)
 
 
-def test_auto_measures_each_arm_then_spends_each_batch_on_the_best_rate(toy_spec, tmp_path):
-    spec = toy_spec("time_limit: 10.0\n", "time_limit: 10.0\n  params: {delay: 0.002}\n")
+def test_auto_measures_each_arm_then_spends_each_stint_on_the_best_rate(toy_spec, tmp_path, monkeypatch):
+    # A toy run lasts seconds: short stints, and exploring allowed 60 % of it, so that every
+    # arm gets measured (and some re-measured) in that time.
+    monkeypatch.setattr(auto, "MIN_STINT", 0.2)
+    monkeypatch.setattr(auto, "EXPLORE", 0.6)
+    spec = toy_spec(
+        "time_limit: 10.0\n",
+        "time_limit: 10.0\n  params: {delay: 0.002}\n",
+    )
+    spec.write_text(spec.read_text() + "  emitter: {emitters: 4, batch_size: 25}\n")
     run = tmp_path / "run"
     found = qd.start(
         spec_file=spec,
         out=run,
         algorithm="auto",
-        budget=2500,
+        budget=4000,
         seed=4,
         backend=TWO,
         surrogate=qd.SurrogateOptions(inner_iterations=50, device="cpu"),
     )
     log = json.loads((run / "auto.json").read_text())
     batches = log["batches"]
-    # Each arm measured once (SAS once it has data, an arm whose batch costs more, later).
-    firsts = [b["arm"] for b in batches if b["reason"] == "first measurement"]
-    assert sorted(firsts) == sorted(ARMS) and firsts[0] == "random"
-    for b in batches:
-        rates = b["rates"]
-        if b["reason"] == "best rate":
-            assert rates[b["arm"]] == max(rates.values())
-        elif b["reason"] != "first measurement":  # a losing arm, measured again
-            assert b["reason"].startswith("re-measure") and rates[b["arm"]] < max(rates.values())
-    assert sum(b["evaluations"] for b in batches) == found.state.evaluations == 2500
+    stints = [[b for b in batches if b["stint"] == s] for s in range(batches[-1]["stint"] + 1)]
+    # Each arm measured once, over at least WARMUP batches (SAS once it has data to train on).
+    firsts = [s for s in stints if s[0]["reason"] == "first measurement"]
+    assert sorted(s[0]["arm"] for s in firsts) == sorted(ARMS) and firsts[0][0]["arm"] == "random"
+    assert all(len(s) >= auto.WARMUP for s in firsts)
+    for stint in stints:
+        first = stint[0]
+        rates = first["rates"]
+        assert all((b["arm"], b["reason"], b["rates"]) == (first["arm"], first["reason"], rates) for b in stint)
+        if first["reason"] == "best rate":
+            assert rates[first["arm"]] == max(rates.values())
+        elif first["reason"] != "first measurement":  # a losing arm, measured again
+            assert first["reason"].startswith("re-measure") and rates[first["arm"]] < max(rates.values())
+    # A stint lasts at least its quantum, and measuring other arms than the best took at most
+    # the allowed share of the run (give or take the stint that crossed it).
+    assert all(sum(b["seconds"] for b in stint) >= 0.2 for stint in stints[:-1])
+    explored = [sum(b["seconds"] for b in s) for s in stints[1:] if s[0]["reason"] != "best rate"]
+    spent = sum(b["seconds"] for b in batches)
+    assert explored and sum(explored) <= 0.6 * spent + max(explored)
+    assert sum(b["evaluations"] for b in batches) == found.state.evaluations == 4000
 
     # Where the time went is in run.json and progress.csv too.
     meta = json.loads((run / "run.json").read_text())
     assert meta["algorithm"] == "auto" and set(meta["auto"]["arms"]) == set(ARMS)
-    assert sum(a["evaluations"] for a in meta["auto"]["arms"].values()) == 2500
+    assert sum(a["evaluations"] for a in meta["auto"]["arms"].values()) == 4000
     with open(run / "progress.csv", newline="") as handle:
         proposers = [row["proposer"] for row in csv.DictReader(handle)]
     assert proposers == [b["arm"] for b in batches]
     # SAS trained on what every arm simulated.
-    assert found.state.proposer.arms["sas"].trained > 100
+    proposer = found.state.proposer
+    assert proposer.arms["sas"].trained > 100
+    # CMA-MAE joined a search others began: its emitters started at elites, not at the centre.
+    centre = algorithms.x0(found.domain)
+    assert not any(np.allclose(e.x0, centre) for e in proposer.arms["cma_mae"].scheduler.emitters)
 
 
 def test_auto_stopped_by_its_time_limit_resumes_and_keeps_its_history(toy_spec, tmp_path):
@@ -63,6 +87,8 @@ def test_auto_stopped_by_its_time_limit_resumes_and_keeps_its_history(toy_spec, 
     assert again.exit_code in (0, 1), again.output
     after = json.loads((run / "auto.json").read_text())["batches"]
     assert after[: len(before)] == before and len(after) > len(before)
+    # Exploring may take 8 % of a 10-second run: less than any other arm's first stint.
+    assert {b["arm"] for b in after} == {"random"}
     indices = sorted(r.index for r in RunDirectory.open(run).evaluations())
     assert indices == list(range(len(indices)))
     assert "auto" in (run / "report" / "index.html").read_text()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -247,6 +248,20 @@ def test_a_fit_on_some_rows_trains_on_those_and_standardises_over_all(teleop_dat
     fit = model.fit(theta, grids, targets, rows=np.arange(32, 48))
     assert fit.samples == 16
     torch.testing.assert_close(model.target_mean, torch.as_tensor(targets).mean(dim=0))
+
+
+def optimizer_steps(optimizer: torch.optim.Optimizer) -> int:
+    return int(max(state["step"] for state in optimizer.state.values()))
+
+
+def test_a_fit_past_its_deadline_stops_after_one_batch_even_mid_epoch(teleop_data):
+    domain, theta, grids, targets = teleop_data
+    whole, late = surrogate_for(domain, epochs=3), surrogate_for(domain, epochs=3)
+    whole.fit(theta, grids, targets)
+    late.fit(theta, grids, targets, deadline=time.monotonic())
+    # 48 samples in batches of 16: three steps an epoch, nine in all; past the deadline, one.
+    assert optimizer_steps(whole.occupancy_optimizer) == optimizer_steps(whole.predictor_optimizer) == 9
+    assert optimizer_steps(late.occupancy_optimizer) == optimizer_steps(late.predictor_optimizer) == 1
 
 
 class Counting(SurrogateObjective):
