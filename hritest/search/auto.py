@@ -262,9 +262,10 @@ class Auto:
 
     def _fits(self, search: SearchView, arm: str) -> bool:
         """Whether ``arm``'s next batch would end before the time limit (SAS's ask cannot be cut)."""
+        if arm != "sas":
+            return True
         last = self._batches(arm)
-        seconds = last[-1].seconds if last else self._expected_seconds(arm)
-        return arm != "sas" or seconds <= search.seconds_left
+        return (last[-1].seconds if last else self._expected_seconds(arm)) <= search.seconds_left
 
     def _expected_seconds(self, arm: str) -> float:
         """What a stint of ``arm`` should take: a quantum, or one of its batches if longer (as long
