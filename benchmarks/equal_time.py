@@ -16,7 +16,9 @@ proposing (for SAS and DSAS: training the surrogate and its inner loop); writes 
 others needs no three seeds to say so).
 
 A stopped comparison continues: the same command with the same ``--out`` reuses every run that
-reached the longest mark and resumes a shorter one for the time it lacks.
+reached the longest mark and resumes a shorter one for the time it lacks. ``--out`` remembers the
+commit its runs were made at, and a later commit refuses to reuse them (``--reuse-stale`` to do it
+anyway, e.g. to add seeds of an algorithm whose code did not change).
 """
 
 from __future__ import annotations
@@ -26,6 +28,8 @@ import csv
 import json
 import shutil
 import statistics
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -84,6 +88,31 @@ def run_for(run: Path, *, spec: Path, algorithm: str, seed: int, seconds: float,
     )
 
 
+def commit() -> str:
+    """The checkout's commit, marked ``-dirty`` with uncommitted changes (``unknown`` outside git)."""
+    try:
+        return subprocess.run(
+            ["git", "describe", "--always", "--dirty"], capture_output=True, text=True, check=True
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def check_same_code(out: Path, *, reuse_stale: bool) -> None:
+    """Refuses to mix runs made by different code in one table, unless told to."""
+    mark, now = out / "commit.txt", commit()
+    before = mark.read_text().strip() if mark.is_file() else None
+    if before not in (None, now) and not reuse_stale:
+        sys.exit(
+            f"{out} holds runs made at commit {before}, and this checkout is {now}: a table mixing them "
+            "compares different code. Use a new --out, or pass --reuse-stale if the algorithms' code "
+            "did not change."
+        )
+    out.mkdir(parents=True, exist_ok=True)
+    if before is None:
+        mark.write_text(now + "\n")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("spec", type=Path)
@@ -96,6 +125,7 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--out", type=Path, default=None)
+    parser.add_argument("--reuse-stale", action="store_true", help="reuse runs made at another commit")
     args = parser.parse_args()
     seeds = {}
     for item in filter(None, (a.strip() for a in args.algorithms.split(","))):
@@ -104,6 +134,7 @@ def main() -> None:
     algorithms = list(seeds)
     marks = sorted(float(m) for m in args.minutes.split(","))
     out = args.out or Path("benchmark-runs") / f"equal-time-{args.spec.stem}-{time.strftime('%Y%m%d-%H%M%S')}"
+    check_same_code(out, reuse_stale=args.reuse_stale)
 
     rows: dict[str, list[list[dict[str, float]]]] = {a: [] for a in algorithms}
     for seed in range(max(seeds.values())):
