@@ -38,6 +38,8 @@ from compare import mean_sem
 from hritest import search as qd
 from hritest.search.algorithms import MODEL_FREE
 
+REACHED = "equal_time_reached.txt"  # in a run: the seconds this script last brought it to
+
 
 def progress(run: Path) -> list[dict[str, float]]:
     try:
@@ -62,13 +64,16 @@ def run_for(run: Path, *, spec: Path, algorithm: str, seed: int, seconds: float,
     except (OSError, ValueError):
         meta = {}
     same = meta.get("algorithm") == algorithm and meta.get("seed") == seed
-    if same and done >= seconds - 1:
+    # A run stops up to a batch short of its limit: the marker says it was brought to ``seconds``.
+    reached = float((run / REACHED).read_text()) if (run / REACHED).is_file() else 0.0
+    if same and max(done, reached) >= seconds - 1:
         print(f"{algorithm} seed {seed}: {done:.0f} s earlier in {run}, reused", flush=True)
         return
     backend = qd.Backend(workers=args.workers)
     if same and (run / "checkpoint.pkl").is_file():
         print(f"{algorithm} seed {seed}: {done:.0f} s earlier in {run}, resumed", flush=True)
         qd.resume(run_path=run, time_limit=seconds - done, backend=backend)
+        (run / REACHED).write_text(f"{seconds}\n")
         return
     if run.exists():
         shutil.rmtree(run)
@@ -86,6 +91,7 @@ def run_for(run: Path, *, spec: Path, algorithm: str, seed: int, seconds: float,
             inner_stall=args.inner_stall,
         ),
     )
+    (run / REACHED).write_text(f"{seconds}\n")
 
 
 def commit() -> str:
