@@ -10,8 +10,9 @@ workers).
 
 * **Stints, not batches.** An arm runs for a stint of at least a second and 3 % of the run so
   far (and at least one of its batches; a first stint, :data:`WARMUP`): a 20-scenario batch that
-  fills one cell more or less than the last says nothing. CMA-MAE, joining a search that others
-  began, starts its emitters at the search's elites rather than at the spec's ``x0``.
+  fills one cell more or less than the last says nothing. When CMA-MAE joins a search that
+  others began, or is measured again after they went on, its emitters start afresh at the
+  search's elites, not at the spec's ``x0`` or where they stopped.
 * **Relative rates.** Every rate falls as the archive fills, so a rate measured a minute ago says
   little about now: a stint's gain is compared with what the search's *pace* around it (its rate
   over the :data:`PACE` quanta of time before the stint and, once the search has gone on as long,
@@ -134,7 +135,7 @@ class Auto:
             self.stint += 1
             self.stint_seconds, self.stint_batches = 0.0, 0
             self.stint_pace = self._pace(len(self.history), before=True)
-            if self.choice == "cma_mae" and not self._batches("cma_mae"):
+            if self.choice == "cma_mae" and self.reason != "best rate":
                 self._start_cma_mae(search.domain)
             self.rates = {arm: round(self.score(arm), 4) for arm in ARMS if self._batches(arm)}
         self.asked = (time.monotonic(), search.qd_score)
@@ -212,12 +213,14 @@ class Auto:
         return warming or self.stint_seconds < self.quantum()
 
     def _start_cma_mae(self, domain: Domain) -> None:
-        """CMA-MAE joins a search that others began: its emitters start at elites the search has
-        found, one each, rather than all at the spec's ``x0``."""
+        """CMA-MAE joins a search that others began, or comes back to one that others went on
+        with: its emitters start afresh at elites the search has found, one each, rather than all
+        at the spec's ``x0`` or where they stopped (a region the search has since filled: resumed,
+        a teleoperation run's re-measurements gained a quarter of the search's pace or less)."""
         emitters = domain.spec.search.emitter.emitters
         starts = self.shared.sample_elites(emitters)["solution"] if not self.shared.empty else None
         self.arms["cma_mae"] = ModelFree(
-            algorithms.scheduler(domain, "cma_mae", self.shared, seed=self.seed, starts=starts)
+            algorithms.scheduler(domain, "cma_mae", self.shared, seed=self.seed + self.stint, starts=starts)
         )
 
     def _choose(self, search: SearchView) -> tuple[str, str]:
