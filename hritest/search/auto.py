@@ -11,8 +11,8 @@ workers).
 * **Stints, not batches.** An arm runs for a stint of at least a second and 3 % of the run so
   far (and at least one of its batches; a first stint, :data:`WARMUP`): a 20-scenario batch that
   fills one cell more or less than the last says nothing. When CMA-MAE joins a search that
-  others began, or comes back after they went on for longer than its last stint, its emitters
-  start afresh at the search's elites, not at the spec's ``x0`` or where they stopped.
+  others began, or comes back after they went on for :data:`PATIENCE` times its last stint, its
+  emitters start afresh at the search's elites, not at the spec's ``x0`` or where they stopped.
 * **Relative rates.** Every rate falls as the archive fills, so a rate measured a minute ago says
   little about now: a stint's gain is compared with what the search's *pace* around it (its rate
   over the :data:`PACE` quanta of time before the stint and, once the search has gone on as long,
@@ -302,11 +302,13 @@ class Auto:
         return sum(b.seconds for b in self.history[last:])
 
     def _stale(self, arm: str) -> bool:
-        """Whether the others have had longer since ``arm``'s last batch than its last stint
-        lasted: where it stopped, the search has since moved on (a CMA-MAE that came back as the
-        best after a minute away and went on from there scored under half the pace, on
-        teleoperation)."""
-        return self._since(arm) > self._last_stint_seconds(arm)
+        """Whether the others have had :data:`PATIENCE` times ``arm``'s last stint since its last
+        batch, as long as a losing arm waits to be measured again: where it stopped, the search
+        has since moved on (a CMA-MAE that came back as the best after a minute away and went on
+        from there scored under half the pace, on teleoperation). Not after a shorter pause: a
+        restarted CMA-ES needs generations to adapt again, and restarting CMA-MAE after every
+        second-long stint of another arm lost it for good on a 2-minute teleoperation run."""
+        return self._since(arm) >= PATIENCE * self._last_stint_seconds(arm)
 
     def _last_stint_seconds(self, arm: str) -> float:
         last = self._batches(arm)[-1].stint

@@ -78,7 +78,8 @@ def test_auto_measures_each_arm_then_spends_each_stint_on_the_best_rate(toy_spec
 
 def test_cma_mae_starts_afresh_at_the_searchs_elites_when_it_comes_back(toy_spec, tmp_path, monkeypatch):
     # The choices are scripted (which arm wins is the test above's): CMA-MAE is measured, loses
-    # to Random, is measured again, wins, and comes back as the best after Random's three stints.
+    # to Random, is measured again, wins, comes back as the best after one stint of Random, and
+    # again after ten.
     monkeypatch.setattr(auto, "MIN_STINT", 0.2)
     script = [
         ("random", "first measurement"),
@@ -87,8 +88,8 @@ def test_cma_mae_starts_afresh_at_the_searchs_elites_when_it_comes_back(toy_spec
         ("cma_mae", "re-measure (best: random)"),
         ("cma_mae", "best rate"),
         ("random", "best rate"),
-        ("random", "best rate"),
-        ("random", "best rate"),
+        ("cma_mae", "best rate"),
+        *[("random", "best rate")] * 10,
         ("cma_mae", "best rate"),
     ]
     monkeypatch.setattr(auto.Auto, "_choose", lambda self, search: script[min(self.stint + 1, len(script) - 1)])
@@ -102,13 +103,13 @@ def test_cma_mae_starts_afresh_at_the_searchs_elites_when_it_comes_back(toy_spec
     monkeypatch.setattr(auto.Auto, "_start_cma_mae", recording)
     spec = toy_spec("time_limit: 10.0\n", "time_limit: 10.0\n  params: {delay: 0.002}\n")
     spec.write_text(spec.read_text() + "  emitter: {emitters: 4, batch_size: 25}\n")
-    found = qd.start(spec_file=spec, out=tmp_path / "run", algorithm="auto", budget=4000, seed=1, backend=TWO)
+    found = qd.start(spec_file=spec, out=tmp_path / "run", algorithm="auto", budget=8000, seed=1, backend=TWO)
     batches = json.loads((tmp_path / "run" / "auto.json").read_text())["batches"]
-    assert [b["stint"] for b in batches if b["arm"] == "cma_mae"][-1] > 9  # it went on as the best
-    # Started at its first measurement, its second and its comeback; not when it went straight on
-    # as the best, after its re-measurement or its comeback.
-    assert sorted(starts) == [1, 3, 8] and found.state.proposer.arms["cma_mae"].scheduler is starts[8]
-    first, again, back = ([e.x0 for e in starts[s].emitters] for s in (1, 3, 8))
+    assert [b["stint"] for b in batches if b["arm"] == "cma_mae"][-1] > 18  # it went on as the best
+    # Started at its first measurement, its second and its comeback after a long pause (ten stints
+    # against PATIENCE times its last); not when it went straight on or came back after one stint.
+    assert sorted(starts) == [1, 3, 17] and found.state.proposer.arms["cma_mae"].scheduler is starts[17]
+    first, again, back = ([e.x0 for e in starts[s].emitters] for s in (1, 3, 17))
     assert not any(np.allclose(a, b) for a in first for b in again)
     assert not any(np.allclose(a, b) for a in again for b in back)
 
