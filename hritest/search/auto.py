@@ -307,7 +307,7 @@ class Auto:
         has since moved on (a CMA-MAE that came back as the best after a minute away and went on
         from there scored under half the pace, on teleoperation). Not after a shorter pause: a
         restarted CMA-ES needs generations to adapt again, and restarting CMA-MAE after every
-        second-long stint of another arm lost it for good on a 2-minute teleoperation run."""
+        second-long stint of another arm cost it its lead for 43 s of a 2-minute teleoperation run."""
         return self._since(arm) >= PATIENCE * self._last_stint_seconds(arm)
 
     def _last_stint_seconds(self, arm: str) -> float:
