@@ -310,10 +310,16 @@ class Evaluator:
 
 
 def _shutdown(executor: cf.Executor) -> None:
+    """Stops ``executor`` and waits for its threads (nothing runs on it by now, or it was killed).
+
+    Waiting matters: a process pool left to shut down on its own races the interpreter's exit,
+    whose hook writes to a pipe the pool's manager thread may be closing at that moment (CPython
+    3.11 prints "OSError: Bad file descriptor" on a search stopped by SIGTERM).
+    """
     try:
-        executor.shutdown(wait=False, cancel_futures=True)
+        executor.shutdown(wait=True, cancel_futures=True)
     except TypeError:  # Dask's ClientExecutor predates cancel_futures
-        executor.shutdown(wait=False)
+        executor.shutdown(wait=True)
 
 
 def _note_retry(evaluation: Evaluation, attempts: int) -> Evaluation:
