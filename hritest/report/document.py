@@ -173,10 +173,10 @@ def _glance(data: RunData) -> list:
             Table(
                 ["auto: arm", *columns],
                 [[arm, *(_format(row.get(c, "")) for c in columns)] for arm, row in data.auto["arms"].items()],
-                caption="Where --algorithm auto spent the time: each stint of a few seconds goes to the "
-                "leading arm; another arm is measured now and then, in at most 8% of the run, and takes the "
-                "lead when its score (QD-score gained over what the search's pace just before would have "
-                "gained) beats the leader's; every choice and its measurements are in auto.json",
+                caption="Where --algorithm auto spent the time: each stint of a few seconds goes to the arm "
+                "with the best recent score (its QD-score per second over the search's pace just before), "
+                "a losing arm is measured again now and then, in at most 8% of the run; every choice and "
+                "its measurements are in auto.json",
             )
         )
     if data.surrogate is not None:

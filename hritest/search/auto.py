@@ -18,18 +18,12 @@ workers).
   over the :data:`PACE` quanta of time before the stint and, once the search has gone on as long,
   after it) would have gained in the same seconds, and an arm's score is that ratio over its last
   :data:`WINDOW` stints.
-* **The lead changes hands only in a measurement.** Each stint goes to the *leader*, except
+* **Exploring costs a bounded share.** Each stint goes to the arm with the best score, except
   that arms never measured are measured first, one at a time and the cheapest first, and a losing
   arm again once the others have had :data:`PATIENCE` times its last stint (a patience that
-  doubles each time it loses again); both only while measuring arms other than the leader has
-  taken at most :data:`EXPLORE` of the run. With a time limit, that share is of the limit, from
-  the start: the sooner the best arm is known, the longer it runs. The leader is the best-scored
-  arm once every arm then available has been measured, and after that an arm whose measurement
-  stint just beat the leader's score: that stint ran beside the leader's, against its pace, a
-  paired comparison. Scores of arms not running stay as they were measured while the leader's,
-  compared with a pace it sets itself, wanders around 1 from stint to stint: comparing the two
-  switched arms on noise (a third of a 2-minute teleoperation run on Random, at half CMA-MAE's
-  rate).
+  doubles each time it loses again); both only while measuring arms other than the best has taken
+  at most :data:`EXPLORE` of the run. With a time limit, that share is of the limit, from the
+  start: the sooner the best arm is known, the longer it runs.
 
 All arms share what is simulated: SAS trains on every evaluation, and the model-free arms share one
 archive, which receives SAS's evaluations too. SAS runs here with the schedule whose cost follows
@@ -81,7 +75,6 @@ class Batch:
     seconds: float  # wall time to propose and simulate it
     gain: float  # QD-score gained
     pace: float = 0.0  # the search's QD-score per second over the time before its stint
-    leader: str | None = None  # the leader when its stint began
     rates: dict[str, float]  # every measured arm's score when its stint began
 
     @property
@@ -119,7 +112,6 @@ class Auto:
         self.history: list[Batch] = []
         self.patience = dict.fromkeys(ARMS, PATIENCE)
         self.choice: str | None = None
-        self.leader: str | None = None  # where stints go when nothing is being measured
         self.reason = ""
         self.stint = -1
         self.spent = 0.0  # seconds of every batch so far
@@ -171,7 +163,6 @@ class Auto:
                     seconds=round(seconds, 4),
                     gain=search.qd_score - score,
                     pace=self.stint_pace,
-                    leader=self.leader,
                     rates=self.rates,
                 )
             )
@@ -241,7 +232,7 @@ class Auto:
         # sooner the best arm is known, the longer it runs.
         horizon = spent + (search.seconds_left if math.isfinite(search.seconds_left) else 0.0)
         measured = [arm for arm in ARMS if self._batches(arm)]
-        best = self.leader or max(measured, key=self.score)
+        best = max(measured, key=self.score)
         # Arms never measured go first, the cheapest first, and SAS last: it needs data to train
         # on, and its first round costs the most.
         unmeasured = sorted((arm for arm in ARMS[:-1] if arm not in measured), key=self._expected_seconds)
@@ -257,28 +248,20 @@ class Auto:
             cost = self._expected_seconds(arm)
             if explored + cost <= EXPLORE * max(horizon, spent + cost) and self._fits(search, arm):
                 return arm, reason
-        self.leader = best
         return best, "best rate"
 
     def _end_stint(self) -> None:
-        """After a stint that measured an arm while another led: if the arm beat the leader's
-        score, it leads, and waits the least when it loses again; if it lost a re-measurement, it
-        waits twice as long to be measured again."""
+        """After a stint that measured a losing arm: if it still loses, it waits twice as long; an
+        arm that comes out best waits the least when it loses again."""
         stint = [b for b in self.history if b.stint == self.stint]
-        arm = stint[0].arm if stint else None
-        if arm is None or self.leader is None or arm == self.leader or stint[0].reason == "best rate":
+        if not stint or stint[0].reason == "first measurement":
             return
-        if self.stint_score() > self.score(self.leader):
-            self.leader = arm
+        arm = stint[0].arm
+        others = [self.score(other) for other in ARMS if other != arm and self._batches(other)]
+        if others and self.score(arm) >= max(others):
             self.patience[arm] = PATIENCE
         elif stint[0].reason.startswith("re-measure"):
             self.patience[arm] = min(2 * self.patience[arm], MAX_PATIENCE)
-
-    def stint_score(self) -> float:
-        """The current stint's gain over what the search's pace before it would have gained in its
-        seconds: a measurement's score, against the leader's pace alone."""
-        stint = [b for b in self.history if b.stint == self.stint]
-        return _ratio(sum(b.gain for b in stint), self.stint_pace * sum(b.seconds for b in stint))
 
     def _fits(self, search: SearchView, arm: str) -> bool:
         """Whether ``arm``'s next batch would end before the time limit (SAS's ask cannot be cut)."""

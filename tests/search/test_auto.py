@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import csv
-import itertools
 import json
 
 import numpy as np
@@ -46,26 +45,14 @@ def test_auto_measures_each_arm_then_spends_each_stint_on_the_best_rate(toy_spec
     firsts = [s for s in stints if s[0]["reason"] == "first measurement"]
     assert sorted(s[0]["arm"] for s in firsts) == sorted(ARMS) and firsts[0][0]["arm"] == "random"
     assert all(len(s) >= auto.WARMUP for s in firsts)
-    # The first leader is the best-scored arm; the lead changes hands only to an arm whose
-    # measurement stint, just before, beat the leader's score.
-    leaders = [s[0]["leader"] for s in stints]
-    first_lead = leaders.index(next(x for x in leaders if x))
-    assert stints[first_lead - 1][0]["reason"] != "best rate" and stints[first_lead][0]["reason"] == "best rate"
-    assert leaders[first_lead] == max(stints[first_lead][0]["rates"], key=stints[first_lead][0]["rates"].get)
-    for previous, stint in itertools.pairwise(stints):
+    for stint in stints:
         first = stint[0]
-        same = ("arm", "reason", "leader")
-        assert all(tuple(b[k] for k in same) == tuple(first[k] for k in same) for b in stint)
+        rates = first["rates"]
+        assert all((b["arm"], b["reason"], b["rates"]) == (first["arm"], first["reason"], rates) for b in stint)
         if first["reason"] == "best rate":
-            assert first["arm"] == first["leader"]
+            assert rates[first["arm"]] == max(rates.values())
         elif first["reason"] != "first measurement":  # a losing arm, measured again
-            assert first["reason"] == f"re-measure (best: {first['leader']})"
-        if previous[0]["leader"] and first["leader"] != previous[0]["leader"]:
-            measured = previous[0]
-            assert measured["arm"] == first["leader"] and measured["reason"] != "best rate"
-            gain, seconds = sum(b["gain"] for b in previous), sum(b["seconds"] for b in previous)
-            assert auto._ratio(gain, measured["pace"] * seconds) > first["rates"][previous[0]["leader"]]
-    assert len(set(leaders[first_lead:])) > 1  # exploring 60 %, a measurement took the lead at least once
+            assert first["reason"].startswith("re-measure") and rates[first["arm"]] < max(rates.values())
     # A stint lasts at least its quantum, and measuring other arms than the best took at most
     # the allowed share of the run (give or take the stint that crossed it).
     assert all(sum(b["seconds"] for b in stint) >= 0.2 for stint in stints[:-1])
