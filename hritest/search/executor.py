@@ -310,16 +310,18 @@ class Evaluator:
 
 
 def _shutdown(executor: cf.Executor) -> None:
-    """Stops ``executor`` and waits for its threads (nothing runs on it by now, or it was killed).
+    """Stops ``executor``; a local pool (idle by now, or its workers killed) is waited for.
 
-    Waiting matters: a process pool left to shut down on its own races the interpreter's exit,
-    whose hook writes to a pipe the pool's manager thread may be closing at that moment (CPython
-    3.11 prints "OSError: Bad file descriptor" on a search stopped by SIGTERM).
+    Waiting matters there: a process pool left to shut down on its own races the interpreter's
+    exit, whose hook writes to a pipe the pool's manager thread may be closing at that moment
+    (CPython 3.11 prints "OSError: Bad file descriptor" on a search stopped by SIGTERM). A Dask
+    executor is not: waiting would let the cluster finish the jobs in flight, where not waiting
+    cancels them.
     """
     try:
-        executor.shutdown(wait=True, cancel_futures=True)
+        executor.shutdown(wait=isinstance(executor, cf.ProcessPoolExecutor), cancel_futures=True)
     except TypeError:  # Dask's ClientExecutor predates cancel_futures
-        executor.shutdown(wait=True)
+        executor.shutdown(wait=False)
 
 
 def _note_retry(evaluation: Evaluation, attempts: int) -> Evaluation:
