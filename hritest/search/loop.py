@@ -225,6 +225,8 @@ class Search:
                 directory, whose path the exception holds as ``traceback_file``.
         """
         self.deadline, self.progress = deadline, progress
+        if self.state.algorithm not in ("random", "map_elites"):  # the others run CMA-ES
+            algorithms.compile_cma_es()
         self.clock = (time.monotonic(), self.state.elapsed)
         try:
             while not (self.done or self.out_of_time):
