@@ -16,6 +16,7 @@ from ribs.schedulers import Scheduler
 from hritest.domain import Domain
 
 MODEL_FREE = ("random", "map_elites", "cma_mae")
+CMA_MAE_RULES = {"ranker": "imp", "selection_rule": "mu", "restart_rule": "basic"}  # the paper's CMA-MAE emitters
 
 
 class UniformEmitter(EmitterBase):
@@ -89,9 +90,7 @@ def scheduler(domain: Domain, algorithm: str, archive, *, seed: int, starts: np.
                 archive,
                 x0=x0(domain) if starts is None else starts[i],
                 sigma0=sigma0(domain),
-                ranker="imp",
-                selection_rule="mu",
-                restart_rule="basic",
+                **CMA_MAE_RULES,
                 batch_size=settings.batch_size,
                 seed=int(s),
             )
@@ -109,18 +108,16 @@ def compile_cma_es() -> None:
     numba compiles CMA-ES's sampling and update at their first call in a process (~3 s on these
     machines) and keeps nothing on disk. Paid inside a search, it fell on the first batch that ran
     CMA-ES: under ``--algorithm auto`` it was 2.4 of the 5.6 s of CMA-MAE's first measurement on
-    teleoperation, which then scored as if CMA-MAE were half as fast as it is. Like the imports a
-    run's wall time does not count either, it is start-up. A two-dimensional search compiles the
-    same code as any other (numba specialises on types, not sizes).
+    teleoperation, which then scored as if CMA-MAE were half as fast as it is. It is start-up, like
+    the imports, which a run's wall time does not count either. A two-dimensional search with the
+    same emitter rules compiles the same code as any other (numba specialises on types, not sizes).
     """
     archive = GridArchive(solution_dim=2, dims=[2], ranges=[(0.0, 1.0)], learning_rate=0.01, threshold_min=0.0)
     emitter = EvolutionStrategyEmitter(
         archive,
         x0=np.zeros(2),
         sigma0=0.1,
-        ranker="imp",
-        selection_rule="mu",
-        restart_rule="basic",
+        **CMA_MAE_RULES,
         batch_size=4,
         seed=0,
     )

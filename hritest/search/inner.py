@@ -119,9 +119,7 @@ def exploit(
                 archive,
                 x0=start,
                 sigma0=algorithms.sigma0(domain),
-                ranker="imp",
-                selection_rule="mu",
-                restart_rule="basic",
+                **algorithms.CMA_MAE_RULES,
                 batch_size=settings.batch_size,
                 seed=int(s),
             )
