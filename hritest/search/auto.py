@@ -183,9 +183,12 @@ class Auto:
         gained in their seconds: what decides. The pace of a stint is that before it, or, once
         the search has gone on for as long, the geometric mean of the paces before and after it:
         rates fall fast early on, and a stint compared with the pace before it alone would look
-        worse the longer it lasted."""
+        worse the longer it lasted. The run's first stint has no pace before it: it scores 1 while
+        its arm has no other, and no longer counts once it has (counted, its gain against no
+        expected gain made Random's score 4 to 6 after a one-second re-measurement)."""
+        stints = self._stints(arm)
         gain = expected = 0.0
-        for stint in self._stints(arm)[-WINDOW:]:
+        for stint in [s for s in stints if s[0].stint > 0][-WINDOW:] or stints[:1]:
             before = stint[0].pace
             after = self._pace(stint[-1].batch, before=False)
             pace = math.sqrt(before * after) if after is not None and before > 0 and after > 0 else before

@@ -6,10 +6,12 @@ import csv
 import json
 
 import numpy as np
+import pytest
 from typer.testing import CliRunner
 
 from hritest import search as qd
 from hritest.cli import app
+from hritest.domain import load_domain
 from hritest.rundir import RunDirectory
 from hritest.search import algorithms, auto
 from hritest.search.auto import ARMS
@@ -130,3 +132,19 @@ def test_auto_stopped_by_its_time_limit_resumes_and_keeps_its_history(toy_spec, 
     indices = sorted(r.index for r in RunDirectory.open(run).evaluations())
     assert indices == list(range(len(indices)))
     assert "auto" in (run / "report" / "index.html").read_text()
+
+
+def test_the_runs_first_stint_scores_only_until_its_arm_has_another(toy_spec):
+    # Random's first stint has no pace before it; counted beside a later stint, its gain against
+    # no expected gain would make Random look several times the pace.
+    proposer = auto.Auto(load_domain(toy_spec()), seed=0, options=qd.SurrogateOptions())
+
+    def batch(number: int, stint: int, arm: str, gain: float, pace: float) -> auto.Batch:
+        return auto.Batch(
+            batch=number, stint=stint, arm=arm, reason="", evaluations=10, seconds=1.0, gain=gain, pace=pace, rates={}
+        )
+
+    proposer.history = [batch(1, 0, "random", 1000.0, 0.0)]
+    assert proposer.score("random") == 1.0
+    proposer.history += [batch(2, 1, "map_elites", 500.0, 1000.0), batch(3, 2, "random", 400.0, 500.0)]
+    assert proposer.score("random") == pytest.approx(400.0 / 500.0)
