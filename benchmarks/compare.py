@@ -1,7 +1,8 @@
 """The paper's experiment: every algorithm on one spec, several seeds, QD-score at the end.
 
     python benchmarks/compare.py specs/teleop.yaml --algorithms dsas,sas,cma_mae,map_elites,random \\
-        --evals 2000 --seeds 3 [--inner-iterations 1000] [--workers 2] [--device auto] [--out DIR]
+        --evals 2000 --seeds 3 [--inner-iterations 1000] [--training incremental] [--inner-stall 50] \\
+        [--workers 2] [--device auto] [--out DIR]
 
 Prints a Markdown table (final QD-score raw and normalised, mean +- standard error over seeds,
 coverage, best objective, search wall time, evaluations per second, and each algorithm's QD-score
@@ -20,6 +21,7 @@ import json
 import math
 import shutil
 import statistics
+import sys
 import time
 from pathlib import Path
 
@@ -36,24 +38,26 @@ def final_row(run: Path) -> dict[str, float]:
     return {k: float(v) for k, v in rows[-1].items() if k != "proposer"}
 
 
-def finished(run: Path, evaluations: int) -> bool:
-    """Whether ``run`` is a complete run of this budget (a comparison run again reuses it)."""
-    try:
-        return final_row(run)["evaluations"] == evaluations
-    except (OSError, KeyError, IndexError, ValueError):
-        return False
-
-
-def resumable(run: Path, *, algorithm: str, evals: int, seed: int, inner_iterations: int, spec: Path) -> bool:
-    """Whether ``run`` is a stopped run of these settings and of this spec, to continue from its checkpoint."""
+def same_run(run: Path, *, algorithm: str, evals: int, seed: int, surrogate: dict, spec: Path) -> bool:
+    """Whether ``run`` is a run of these settings (``surrogate``: SAS's and DSAS's ``run.json``
+    entries) and of this spec: one a comparison run again may reuse or continue."""
     try:
         meta = json.loads((run / "run.json").read_text())
     except (OSError, ValueError):
         return False
     wanted = {"algorithm": algorithm, "budget": evals, "seed": seed, "spec_digest": digest(spec)}
     if algorithm in SURROGATE:
-        wanted["inner_iterations"] = inner_iterations
-    return (run / "checkpoint.pkl").is_file() and all(meta.get(k) == v for k, v in wanted.items())
+        wanted |= surrogate
+    meta = {"training": "paper", "inner_stall": None, "pipeline": False, **meta}  # runs from before these entries
+    return all(meta.get(k) == v for k, v in wanted.items())
+
+
+def finished(run: Path, evaluations: int) -> bool:
+    """Whether ``run`` got to the end of its budget."""
+    try:
+        return final_row(run)["evaluations"] == evaluations
+    except (OSError, KeyError, IndexError, ValueError):
+        return False
 
 
 def mean_sem(values: list[float]) -> str:
@@ -69,27 +73,43 @@ def main() -> None:
     parser.add_argument("--evals", type=int, default=2000)
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--inner-iterations", type=int, default=None)
+    parser.add_argument("--training", choices=["paper", "incremental"], default=None, help="default: the spec's")
+    parser.add_argument("--inner-stall", type=int, default=None, help="SAS and DSAS; default: the spec's")
+    parser.add_argument(
+        "--pipeline", action=argparse.BooleanOptionalAction, default=None, help="SAS and DSAS; default: the spec's"
+    )
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--device", default="auto")
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args()
     algorithms = [a.strip() for a in args.algorithms.split(",") if a.strip()]
-    inner_iterations = args.inner_iterations or load_spec(args.spec).search.surrogate.inner_iterations
+    settings = load_spec(args.spec).search.surrogate
+    inner_iterations = args.inner_iterations or settings.inner_iterations
+    surrogate = {
+        "inner_iterations": inner_iterations,
+        "training": args.training or settings.training,
+        "inner_stall": args.inner_stall or settings.inner_stall,
+        "pipeline": settings.pipeline if args.pipeline is None else args.pipeline,
+    }
     out = args.out or Path("benchmark-runs") / f"{args.spec.stem}-{time.strftime('%Y%m%d-%H%M%S')}"
 
     results: dict[str, list[dict[str, float]]] = {a: [] for a in algorithms}
     for seed in range(args.seeds):  # seed by seed, so that a stopped comparison has every algorithm
         for algorithm in algorithms:
             run = out / f"{algorithm}-s{seed}"
-            if finished(run, args.evals):
+            same = same_run(run, algorithm=algorithm, evals=args.evals, seed=seed, surrogate=surrogate, spec=args.spec)
+            if same and finished(run, args.evals):
                 print(f"{algorithm} seed {seed}: finished earlier in {run}, reused", flush=True)
-            elif resumable(
-                run, algorithm=algorithm, evals=args.evals, seed=seed, inner_iterations=inner_iterations, spec=args.spec
-            ):
+            elif same and (run / "checkpoint.pkl").is_file():
                 print(f"{algorithm} seed {seed}: stopped earlier in {run}, resumed", flush=True)
                 qd.resume(run_path=run, backend=qd.Backend(workers=args.workers))
             else:
-                if run.exists():  # a run of other settings, or one that never checkpointed
+                if run.exists() and not same:
+                    sys.exit(
+                        f"{run} is a run of other settings or of another version of {args.spec}; "
+                        "use another --out, or move the run away"
+                    )
+                if run.exists():  # it never checkpointed: nothing to continue
                     shutil.rmtree(run)
                 qd.start(
                     spec_file=args.spec,
@@ -98,7 +118,13 @@ def main() -> None:
                     budget=args.evals,
                     seed=seed,
                     backend=qd.Backend(workers=args.workers),
-                    surrogate=qd.SurrogateOptions(inner_iterations=args.inner_iterations, device=args.device),
+                    surrogate=qd.SurrogateOptions(
+                        inner_iterations=args.inner_iterations,
+                        device=args.device,
+                        training=args.training,
+                        inner_stall=args.inner_stall,
+                        pipeline=args.pipeline,
+                    ),
                 )
             row = final_row(run)
             row["total_seconds"] = row["wall_time"]
@@ -110,7 +136,8 @@ def main() -> None:
     random_qd = statistics.fmean(r["qd_score"] for r in results["random"]) if "random" in results else None
     lines = [
         f"{args.spec.name}: {args.evals} evaluations, {args.seeds} seeds, inner iterations "
-        f"{inner_iterations:,} (SAS, DSAS), {args.workers} workers",
+        f"{inner_iterations:,} (SAS, DSAS), training {surrogate['training']}, inner stall "
+        f"{surrogate['inner_stall'] or 'none'}, pipeline {surrogate['pipeline']}, {args.workers} workers",
         "",
         "| algorithm | QD-score | normalised QD-score | coverage | best | wall s | evaluations / s "
         "| QD-score / Random |",

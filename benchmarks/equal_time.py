@@ -89,6 +89,7 @@ def run_for(run: Path, *, spec: Path, algorithm: str, seed: int, seconds: float,
             device=args.device,
             training=args.training,
             inner_stall=args.inner_stall,
+            pipeline=args.pipeline,
         ),
     )
     (run / REACHED).write_text(f"{seconds}\n")
@@ -128,6 +129,9 @@ def main() -> None:
     parser.add_argument("--inner-iterations", type=int, default=300, help="SAS and DSAS (auto sizes its own)")
     parser.add_argument("--training", choices=["paper", "incremental"], default=None, help="default: the spec's")
     parser.add_argument("--inner-stall", type=int, default=None, help="SAS and DSAS; default: the spec's")
+    parser.add_argument(
+        "--pipeline", action=argparse.BooleanOptionalAction, default=None, help="SAS and DSAS; default: the spec's"
+    )
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--out", type=Path, default=None)

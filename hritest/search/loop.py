@@ -5,12 +5,19 @@ told to the scheduler in the order they were asked. The state (a
 :class:`~hritest.search.state.SearchState`) is checkpointed after every ask and every tell, and each
 finished evaluation is appended to the run directory the moment it arrives, so a killed run resumes
 from its last checkpoint and re-evaluates nothing it finished.
+
+A proposer that can ask ahead (SAS / DSAS with ``pipeline``) is asked for the next batch on a
+thread while the current batch simulates, from the batches told before it, so the workers need
+not wait while it trains and searches its surrogate; that batch is checkpointed with the state
+(``ahead``) and simulated next, so a pipelined run too resumes as if it had never stopped.
 """
 
 from __future__ import annotations
 
+import ctypes
 import math
 import signal
+import threading
 import time
 import traceback
 from collections import Counter
@@ -44,6 +51,63 @@ ALGORITHMS = (*algorithms.MODEL_FREE, *SURROGATE, AUTO)
 ERROR_LOG = "error.log"  # the traceback of a bug in hritest that stopped the search
 
 
+class _Cancelled(BaseException):
+    """Raised in an ask-ahead thread to stop it (see :meth:`_Ahead.cancel`)."""
+
+
+class _AheadView:
+    """The search as a proposer asking ahead sees it: the batches told so far, fixed when the ask
+    starts, while the batch in flight adds records on the main thread."""
+
+    def __init__(self, search: Search) -> None:
+        self.search, self.domain, self.run_dir = search, search.domain, search.run_dir
+        self.evaluated, self.qd_score = search.evaluated, search.qd_score
+        self.data = search.dataset(before=search.evaluated)
+
+    @property
+    def seconds_left(self) -> float:
+        return self.search.seconds_left
+
+    def dataset(self) -> tuple[np.ndarray, np.ndarray | GridRows, np.ndarray]:
+        return self.data
+
+    def phase(self, name: str) -> None:
+        self.search.ahead_phase = name  # shown beside "simulating" by the next snapshot
+
+
+class _Ahead:
+    """The next batch's ask, on a thread while the current batch simulates."""
+
+    def __init__(self, search: Search) -> None:
+        view, proposer = _AheadView(search), search.state.proposer
+        self.solutions: np.ndarray | None = None
+        self.error: BaseException | None = None
+
+        def ask() -> None:
+            try:
+                self.solutions = proposer.ask(view)
+            except BaseException as exc:  # re-raised on the main thread by result()
+                self.error = exc
+
+        self.thread = threading.Thread(target=ask, name="hritest-ask-ahead", daemon=True)
+        self.thread.start()
+
+    def result(self) -> np.ndarray:
+        """The batch asked, once the ask ends; what the ask raised, raised here."""
+        self.thread.join()
+        if self.error is not None:
+            raise self.error
+        return self.solutions
+
+    def cancel(self) -> None:
+        """Stops the ask at its next Python instruction (training and the inner loop run many
+        short steps), for a search stopped by an interrupt or an error: its proposer is abandoned
+        with the search, never checkpointed half-changed."""
+        if self.thread.is_alive():
+            ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(self.thread.ident), ctypes.py_object(_Cancelled))
+        self.thread.join(timeout=30)
+
+
 @dataclass(frozen=True)
 class Snapshot:
     """Where a search stands, for progress displays.
@@ -51,7 +115,8 @@ class Snapshot:
     ``summary`` and ``failures`` (elites that meet the failure condition) are as of the last
     batch; ``failed`` counts the evaluations that did not complete; ``phase`` says what the
     search is doing: ``proposing`` a batch (for SAS/DSAS, ``training`` the surrogate, then its
-    ``inner loop``) or ``simulating`` one; ``proposer`` is what proposes it (the algorithm, or
+    ``inner loop``) or ``simulating`` one (pipelined, ``simulating + training`` the surrogate for
+    the next batch, and so on); ``proposer`` is what proposes it (the algorithm, or
     the one ``auto`` chose). ``budget`` is ``None`` without an evaluation budget, ``deadline``
     (a ``time.monotonic()`` value) ``None`` without a time limit.
     """
@@ -99,6 +164,7 @@ class Search:
         self.last = Snapshot(state.evaluations, state.budget, None, 0, self.failed)
         self.deadline: float | None = None
         self.cut: ProgressRow | None = None  # where a batch the deadline cut short got to
+        self.ahead_phase = ""  # what an ask ahead of the batch in flight is doing
         self.progress: Callable[[Snapshot], None] = lambda s: None
 
     def _note(self, record: EvaluationRecord) -> None:
@@ -255,13 +321,16 @@ class Search:
         state = self.state
         proposing = 0.0
         if state.pending is None:
-            self.phase("proposing")
-            solutions = state.proposer.ask(self)
-            proposing = time.monotonic() - started
+            if state.ahead is not None:  # asked while the last batch simulated
+                solutions = state.ahead
+            else:
+                self.phase("proposing")
+                solutions = state.proposer.ask(self)
+                proposing = time.monotonic() - started
             left = math.inf if state.budget is None else state.budget - state.evaluations
             count = int(min(len(solutions), left))
             pending = PendingBatch(batch=state.batch + 1, solutions=solutions, first=state.evaluations, count=count)
-            self.state = state = replace(state, batch=pending.batch, pending=pending)
+            self.state = state = replace(state, batch=pending.batch, pending=pending, ahead=None)
             with interrupt.deferred():
                 self.run_dir.save_checkpoint(state)
         pending = state.pending
@@ -283,8 +352,20 @@ class Search:
             done[0] += 1
             self.progress(self.snapshot(extra=done[0]))
 
-        self.progress(self.snapshot(extra=done[0]))
-        evaluator.run(jobs, finished, deadline=self.deadline)
+        last = state.budget is not None and first + count >= state.budget
+        can_ask_ahead = getattr(state.proposer, "can_ask_ahead", lambda search: False)
+        ahead = _Ahead(self) if state.ahead is None and not last and can_ask_ahead(self) else None
+        try:
+            self.progress(self.snapshot(extra=done[0]))
+            evaluator.run(jobs, finished, deadline=self.deadline)
+            if ahead is not None:  # proposing costs the run only what it takes beyond the simulation
+                waiting = time.monotonic()
+                self.state = state = replace(state, ahead=ahead.result())
+                proposing, self.ahead_phase = time.monotonic() - waiting, ""
+        except BaseException:
+            if ahead is not None:
+                ahead.cancel()
+            raise
         records = [self.kept[first + i] for i in range(count) if first + i in self.kept]
         # Told again when a resume completes the batch: adding an elite twice changes nothing.
         self._add_to_result(records)
@@ -332,15 +413,16 @@ class Search:
                 evaluation=np.array([r.index for r in good]),
             )
 
-    def dataset(self) -> tuple[np.ndarray, np.ndarray | GridRows, np.ndarray]:
-        """Training data from every successful evaluation: raw theta, occupancy grids, targets.
+    def dataset(self, before: int | None = None) -> tuple[np.ndarray, np.ndarray | GridRows, np.ndarray]:
+        """Training data from every successful evaluation (with ``before``, of those of a lower
+        index): raw theta, occupancy grids, targets.
 
         Targets are the regularised objective over the objective's range, then the measures. Rows
         are in evaluation order, not in the order the workers finished them (the files' order),
         so that training, and so the run, is the same whatever the number of workers. The grids
         are read from the run directory when indexed (:class:`~hritest.search.training.GridRows`).
         """
-        theta, targets, lines = self.training.in_evaluation_order()
+        theta, targets, lines = self.training.in_evaluation_order(before)
         if math.prod(self.occupancy_shape) == 0:
             return theta, np.zeros((len(theta), *self.occupancy_shape), np.float32), targets
         return theta, GridRows(self.run_dir.occupancy(self.occupancy_shape), lines), targets
@@ -351,7 +433,7 @@ class Search:
             self.last,
             evaluations=self.state.evaluations + extra,
             failed=self.failed,
-            phase="simulating",
+            phase=f"simulating + {self.ahead_phase}" if self.ahead_phase else "simulating",
             proposer=self.proposer_name,
             deadline=self.deadline,
         )

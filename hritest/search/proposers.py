@@ -104,6 +104,7 @@ class SurrogateOptions:
     device: str = "auto"
     training: str | None = None  # the spec's search.surrogate.training, unless given
     inner_stall: int | None = None  # the spec's search.surrogate.inner_stall, unless given
+    pipeline: bool | None = None  # the spec's search.surrogate.pipeline, unless given
 
 
 class SurrogateAssisted:
@@ -114,6 +115,10 @@ class SurrogateAssisted:
     scratch, and propose one random surrogate elite per block of the selection grid. Each
     proposal's prediction is kept, so that once simulated it measures the surrogate's accuracy
     on data it was not trained on (the paper's held-out evaluation).
+
+    With ``pipeline``, the search loop asks for the next batch while the current one simulates
+    (see :meth:`can_ask_ahead`): an outer iteration then trains on every evaluation but the
+    batch in flight.
     """
 
     def __init__(self, domain: Domain, *, gradients: bool, seed: int, options: SurrogateOptions) -> None:
@@ -136,9 +141,12 @@ class SurrogateAssisted:
         )
         self.training = options.training or settings.training
         self.stall = options.inner_stall or settings.inner_stall
+        self.pipeline = settings.pipeline if options.pipeline is None else options.pipeline
         self.trained = 0  # samples the surrogate had seen at its last fit
         self.outer = 0
-        self.pending_predictions: np.ndarray | None = None
+        # Per batch asked and not yet told, oldest first: its outer iteration, proposals and their
+        # predictions. Two are pending while a pipelined search asks ahead.
+        self.predictions: list[tuple[int, np.ndarray, np.ndarray]] = []
         self.held_out: list[tuple[int, list[float], list[float]]] = []  # (outer iteration, predicted, true)
         self.fits: list[dict] = []
 
@@ -149,7 +157,6 @@ class SurrogateAssisted:
         more of the run than the simulator)."""
         space = search.domain.space
         done = search.evaluated
-        self.pending_predictions = None
         if done < self.initial:
             return self.rng.uniform(space.lower, space.upper, size=(self.initial - done, space.dim))
         started = time.monotonic()
@@ -189,8 +196,13 @@ class SurrogateAssisted:
         proposals = inner.downsample(search.domain, archive, rng=self.rng)
         if len(proposals) == 0:  # an empty surrogate archive: explore instead of stalling
             proposals = self.rng.uniform(space.lower, space.upper, size=(8, space.dim))
-        self.pending_predictions = self.surrogate.predict(proposals)
+        self.predictions.append((self.outer, proposals, self.surrogate.predict(proposals)))
         return proposals
+
+    def can_ask_ahead(self, search: SearchView) -> bool:
+        """Whether the loop may ask for the next batch before the one simulating is told: with
+        ``pipeline``, once the uniform initial batch is told (the surrogate needs data)."""
+        return self.pipeline and search.evaluated >= self.initial
 
     def _rows(self, samples: int) -> np.ndarray | None:
         """What this round trains on: everything (the paper), or, incrementally, the samples new
@@ -205,17 +217,24 @@ class SurrogateAssisted:
         return np.concatenate([np.sort(old), new])
 
     def __setstate__(self, state: dict) -> None:
-        # Checkpoints written before the incremental schedule existed trained the paper's way.
-        self.__dict__.update({"training": "paper", "stall": None, "trained": 0, **state})
+        # Checkpoints written before the incremental schedule existed trained the paper's way; those
+        # from before pipelining kept one batch's predictions without its proposals (dropped: that
+        # batch's held-out errors go unmeasured).
+        state.pop("pending_predictions", None)
+        before = {"training": "paper", "stall": None, "trained": 0, "pipeline": False, "predictions": []}
+        self.__dict__.update({**before, **state})
 
     def tell(self, search: SearchView, records: list[EvaluationRecord], solutions: np.ndarray) -> None:
-        if self.pending_predictions is None:
+        asked = [i for i, (_, proposals, _) in enumerate(self.predictions) if np.array_equal(proposals, solutions)]
+        if not asked:  # a uniform batch
             return
+        outer, _, predictions = self.predictions[asked[0]]
+        del self.predictions[: asked[0] + 1]
         lo, hi = search.domain.spec.objective.range
-        for record, predicted in zip(records, self.pending_predictions):
+        for record, predicted in zip(records, predictions):
             if record.ok:
                 true = [record.search_objective / (hi - lo), *record.measures]
-                self.held_out.append((self.outer, predicted.tolist(), true))
+                self.held_out.append((outer, predicted.tolist(), true))
         search.run_dir.write_text("surrogate.json", json.dumps(self.accuracy(search.domain), indent=2))
 
     def accuracy(self, domain: Domain) -> dict:

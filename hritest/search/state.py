@@ -46,14 +46,18 @@ class ProgressRow:
     best: float
     failures: int
     proposer: str = ""  # what proposed the batch: the algorithm, or what auto chose
-    propose_seconds: float = 0.0  # of wall_time, spent proposing it (SAS/DSAS: training, inner loop)
+    # Of wall_time, spent proposing it (SAS/DSAS: training, inner loop). Pipelined, the next batch is
+    # asked while this one simulates: then the wait for that ask once this batch was done.
+    propose_seconds: float = 0.0
 
 
 @dataclass(frozen=True, kw_only=True)
 class SearchState:
     """Everything a search needs to continue exactly where it stopped.
 
-    ``evaluations`` counts the told evaluations; ``pending`` is the batch asked after them, if any.
+    ``evaluations`` counts the told evaluations; ``pending`` is the batch asked after them, if any;
+    ``ahead``, the solutions of the batch after that, asked while ``pending`` simulated (a pipelined
+    SAS / DSAS), to be simulated next.
     """
 
     algorithm: str
@@ -64,6 +68,7 @@ class SearchState:
     evaluations: int = 0
     batch: int = 0
     pending: PendingBatch | None = None
+    ahead: np.ndarray | None = None
     elapsed: float = 0.0
     progress: tuple[ProgressRow, ...] = ()
 
@@ -92,7 +97,7 @@ class SearchState:
         try:
             pending = loaded["pending"]
             return cls(
-                **{f.name: loaded[f.name] for f in fields(cls) if f.name not in ("pending", "progress")},
+                **{f.name: loaded[f.name] for f in fields(cls) if f.name not in ("pending", "ahead", "progress")},
                 pending=None if pending is None else PendingBatch(**pending),
                 progress=tuple(ProgressRow(**row) for row in loaded["progress"]),
             )
@@ -137,9 +142,10 @@ def check_resumable(
                 f"says {run.meta.get(name)!r}: the two files come from different runs. Start a new search"
             )
     pending = state.pending
-    if pending is not None and (
-        pending.first != state.evaluations or np.shape(pending.solutions)[1:] != (dim,) or pending.count < 0
-    ):
+    if (
+        pending is not None
+        and (pending.first != state.evaluations or np.shape(pending.solutions)[1:] != (dim,) or pending.count < 0)
+    ) or (state.ahead is not None and np.shape(state.ahead)[1:] != (dim,)):
         raise RunDirectoryError(
             f"{checkpoint}'s pending batch does not follow its {state.evaluations} told evaluations in this "
             f"spec's {dim}-dimensional space; the checkpoint is corrupt. Start a new search"

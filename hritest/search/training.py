@@ -37,10 +37,14 @@ class TrainingData:
         self.theta[self.size], self.targets[self.size] = theta, targets
         self.size += 1
 
-    def in_evaluation_order(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def in_evaluation_order(self, before: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(theta, targets, lines)`` sorted by evaluation index, not by when workers finished:
-        so training, and so the run, is the same whatever the number of workers."""
-        order = np.argsort(self.index[: self.size], kind="stable")
+        so training, and so the run, is the same whatever the number of workers. Copies: later
+        appends do not change them. With ``before``, only the evaluations of lower index."""
+        index = self.index[: self.size]
+        order = np.argsort(index, kind="stable")
+        if before is not None:
+            order = order[index[order] < before]
         return self.theta[order], self.targets[order], self.line[order]
 
 

@@ -398,6 +398,12 @@ class SurrogateSettings(Strict):
         description="stop an inner loop once its archive's QD-score has not grown by 1% in this many iterations "
         "(default: always run inner_iterations, as the paper)",
     )
+    pipeline: bool = Field(
+        False,
+        description="train and search the surrogate for the next batch while the current one simulates, on "
+        "the evaluations told so far (one batch behind the paper's schedule), so that the workers never wait "
+        "for it; for machines with cores or a GPU beyond the workers",
+    )
 
 
 class SearchSpec(Strict):

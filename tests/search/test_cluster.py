@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import threading
@@ -16,8 +17,18 @@ distributed = pytest.importorskip("distributed")
 
 @pytest.fixture(scope="module")
 def cluster():
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as local:
-        yield local.scheduler_address
+    # A LocalCluster sets OMP_NUM_THREADS=1 and the like in this process's environment for its
+    # workers, and leaves them: a search started later in a subprocess would train its surrogate
+    # on one thread, not two as in this process, and round differently.
+    environment = dict(os.environ)
+    try:
+        with distributed.LocalCluster(
+            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+        ) as local:
+            yield local.scheduler_address
+    finally:
+        os.environ.clear()
+        os.environ.update(environment)
 
 
 def test_a_cluster_search_gives_the_same_archive_as_a_local_one(toy_spec, tmp_path, cluster):

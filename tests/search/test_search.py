@@ -7,6 +7,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -19,8 +20,11 @@ from typer.testing import CliRunner
 
 from hritest import search as qd
 from hritest.cli import app
+from hritest.interrupt import Interrupted
 from hritest.rundir import RunDirectory, RunDirectoryError, unpack
 from hritest.search.state import load_state
+
+FIXTURES = Path(__file__).parents[1] / "fixtures"
 
 runner = CliRunner()
 TWO = qd.Backend(workers=2, timeout=20)
@@ -326,3 +330,52 @@ def test_sas_and_dsas_search_a_task_without_grids_and_resume(toy_spec, tmp_path,
 
     assert np.isnan(load_run(tmp_path / "run").surrogate["fits"][0]["occupancy_loss"])  # surrogate.json
     assert write_report(tmp_path / "run", recordings=0).is_file()
+
+
+def pipelined_spec(toy_spec, *, delay: float, inner_iterations: int = 20) -> Path:
+    """The toy domain searched by a pipelined SAS, each episode sleeping ``delay`` seconds."""
+    text = (FIXTURES / "toy.yaml").read_text()
+    text = text.replace("time_limit: 10.0\n", f"time_limit: 10.0\n  params: {{delay: {delay}}}\n")
+    text = text.replace(
+        "algorithm: cma_mae",
+        "algorithm: sas\n  surrogate: {initial_evaluations: 30, inner_iterations: "
+        f"{inner_iterations}, epochs: 5, batch_size: 16, pipeline: true}}",
+    )
+    return toy_spec(text=text)
+
+
+def test_a_pipelined_sas_asks_each_batch_while_the_last_simulates_and_resumes_to_the_same_run(toy_spec, tmp_path):
+    spec = pipelined_spec(toy_spec, delay=0.01)
+    whole = qd.start(spec_file=spec, out=tmp_path / "whole", budget=700, seed=5, backend=TWO)
+    told = [int(row.evaluations) for row in whole.state.progress]  # after each batch
+    assert len(told) >= 4 and told[0] == 30
+    # Batch 2 is asked once the initial batch is told; from then on, batch m is asked while m - 1
+    # simulates, so its surrogate learned from the batches before m - 1 (without the pipeline:
+    # told[:-1]). The last batch, which ends the budget, has nothing to ask ahead of.
+    assert [fit["samples"] for fit in whole.state.proposer.fits] == [30, *told[:-2]]
+    assert whole.state.ahead is None
+
+    killed = tmp_path / "killed"
+    kill(start_in_background(spec, killed, until_lines=told[1] + 10))  # batch 3 simulating, batch 4 asked
+    assert told[1] + 10 < len(RunDirectory.open(killed).evaluations()) < 700
+    resume_to_the_end(killed)
+    assert elites(killed) == elites(tmp_path / "whole")
+
+
+def test_an_interrupt_stops_a_pipelined_ask_and_leaves_the_batch_in_flight_resumable(toy_spec, tmp_path):
+    """Ctrl-C while the next batch is asked on its thread: the ask stops with the search (its
+    inner loop would go on for seconds), and the checkpoint holds the batch in flight only."""
+    spec = pipelined_spec(toy_spec, delay=0.05, inner_iterations=300)
+
+    def interrupt_once_asking_ahead(snapshot: qd.Snapshot) -> None:
+        if snapshot.phase.startswith("simulating + "):
+            raise KeyboardInterrupt
+
+    with pytest.raises(Interrupted) as stopped:
+        qd.start(
+            spec_file=spec, out=tmp_path / "run", budget=700, seed=5, backend=TWO, progress=interrupt_once_asking_ahead
+        )
+    assert stopped.value.signum == signal.SIGINT
+    assert not [t for t in threading.enumerate() if t.name == "hritest-ask-ahead" and t.is_alive()]
+    state = load_state(RunDirectory.open(tmp_path / "run"))
+    assert state.evaluations == 30 and state.pending is not None and state.ahead is None
