@@ -9,8 +9,8 @@ guess: it treats Random, MAP-Elites, CMA-MAE and SAS as the arms of a bandit and
 workers).
 
 * **Stints, not batches.** An arm runs for a stint of at least a second and 3 % of the run so
-  far (and at least one of its batches; a first stint, :data:`WARMUP`): a 20-scenario batch that
-  fills one cell more or less than the last says nothing. When CMA-MAE joins a search that
+  far (and at least one of its batches; a first stint of CMA-MAE or SAS, :data:`WARMUP`): a
+  20-scenario batch that fills one cell more or less than the last says nothing. When CMA-MAE joins a search that
   others began, or comes back after they went on for :data:`PATIENCE` times its last stint, its
   emitters start afresh at the search's elites, not at the spec's ``x0`` or where they stopped.
 * **Relative rates.** Every rate falls as the archive fills, so a rate measured a minute ago says
@@ -56,7 +56,8 @@ MAX_PATIENCE = 256.0
 EXPLORE = 0.08  # at most this share of the run measures arms other than the best
 MIN_STINT = 1.0  # seconds: a stint lasts at least this long (and one batch of its arm)
 STINT_SHARE = 0.03  # and this share of the run so far
-WARMUP = 3  # an arm's first stint lasts at least this many of its batches
+WARMUP = 3  # the first stint of an arm that adapts lasts at least this many of its batches
+ADAPTING = ("cma_mae", "sas")  # their batches depend on their own earlier ones: CMA-ES, the surrogate
 WINDOW = 2  # an arm's score: its gain over the pace's, in its last WINDOW stints
 PACE = 3  # the pace: the search's rate over the last PACE stints' worth of time
 STALL = 50  # SAS's inner loop stops when its archive has not grown in this many iterations
@@ -208,11 +209,14 @@ class Auto:
 
     def _continues(self, search: SearchView) -> bool:
         """Whether the current stint goes on: it has lasted less than a quantum, or is a first
-        measurement of fewer than :data:`WARMUP` batches (CMA-ES adapts over generations, and an
-        arm's first batch in an archive that others filled says little of its next ones)."""
+        measurement of fewer than :data:`WARMUP` batches of an arm that adapts (CMA-ES over its
+        generations, SAS's surrogate over its rounds). Random's and MAP-Elites' batches depend on
+        the archive only, so their first one is like the next: where a batch takes half a
+        minute, warming them up took Random's first stint 40 % of a 5-minute run, and left
+        MAP-Elites unmeasured (collaboration on a slow machine)."""
         if self.stint_batches == 0 or not self._fits(search, self.choice):
             return False
-        warming = self.reason == "first measurement" and self.stint_batches < WARMUP
+        warming = self.reason == "first measurement" and self.choice in ADAPTING and self.stint_batches < WARMUP
         return warming or self.stint_seconds < self.quantum()
 
     def _start_cma_mae(self, domain: Domain) -> None:
@@ -275,15 +279,15 @@ class Auto:
 
     def _expected_seconds(self, arm: str) -> float:
         """What a stint of ``arm`` should take: a quantum, or one of its batches if longer (as long
-        as its last one). A first one: :data:`WARMUP` batches of its size at the recent seconds
-        per evaluation (for SAS, as long again for training and inner loop)."""
+        as its last one). A first one: one batch of its size at the recent seconds per evaluation
+        (for SAS, as long again for training and inner loop), :data:`WARMUP` for an arm that adapts."""
         if done := self._batches(arm):
             return max(self.quantum(), done[-1].seconds)
         if arm == "sas":
             batch = 2 * self._simulation_seconds()
         else:
             batch = self.arms[arm].batch_size * self._seconds_per_evaluation()
-        return max(self.quantum(), WARMUP * batch)
+        return max(self.quantum(), (WARMUP if arm in ADAPTING else 1) * batch)
 
     def _pace(self, index: int, *, before: bool) -> float | None:
         """The search's QD-score gained per second over the last :data:`PACE` quanta of time
