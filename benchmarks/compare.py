@@ -66,20 +66,35 @@ def mean_sem(values: list[float]) -> str:
     return f"{mean:,.1f} ± {sem:,.1f}" if abs(mean) >= 10 else f"{mean:.4f} ± {sem:.4f}"
 
 
+def add_surrogate_arguments(parser: argparse.ArgumentParser, *, inner_iterations: int | None, device: str) -> None:
+    """The SAS and DSAS settings a benchmark overrides (default: the spec's), for :func:`surrogate_options`."""
+    parser.add_argument("--inner-iterations", type=int, default=inner_iterations)
+    parser.add_argument("--training", choices=["paper", "incremental"], default=None, help="default: the spec's")
+    parser.add_argument("--inner-stall", type=int, default=None, help="SAS and DSAS; default: the spec's")
+    parser.add_argument(
+        "--pipeline", action=argparse.BooleanOptionalAction, default=None, help="SAS and DSAS; default: the spec's"
+    )
+    parser.add_argument("--device", default=device)
+
+
+def surrogate_options(args: argparse.Namespace) -> qd.SurrogateOptions:
+    return qd.SurrogateOptions(
+        inner_iterations=args.inner_iterations,
+        device=args.device,
+        training=args.training,
+        inner_stall=args.inner_stall,
+        pipeline=args.pipeline,
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("spec", type=Path)
     parser.add_argument("--algorithms", default="dsas,sas,cma_mae,map_elites,random")
     parser.add_argument("--evals", type=int, default=2000)
     parser.add_argument("--seeds", type=int, default=3)
-    parser.add_argument("--inner-iterations", type=int, default=None)
-    parser.add_argument("--training", choices=["paper", "incremental"], default=None, help="default: the spec's")
-    parser.add_argument("--inner-stall", type=int, default=None, help="SAS and DSAS; default: the spec's")
-    parser.add_argument(
-        "--pipeline", action=argparse.BooleanOptionalAction, default=None, help="SAS and DSAS; default: the spec's"
-    )
+    add_surrogate_arguments(parser, inner_iterations=None, device="auto")
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--device", default="auto")
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args()
     algorithms = [a.strip() for a in args.algorithms.split(",") if a.strip()]
@@ -118,13 +133,7 @@ def main() -> None:
                     budget=args.evals,
                     seed=seed,
                     backend=qd.Backend(workers=args.workers),
-                    surrogate=qd.SurrogateOptions(
-                        inner_iterations=args.inner_iterations,
-                        device=args.device,
-                        training=args.training,
-                        inner_stall=args.inner_stall,
-                        pipeline=args.pipeline,
-                    ),
+                    surrogate=surrogate_options(args),
                 )
             row = final_row(run)
             row["total_seconds"] = row["wall_time"]

@@ -33,7 +33,7 @@ import sys
 import time
 from pathlib import Path
 
-from compare import mean_sem
+from compare import add_surrogate_arguments, mean_sem, surrogate_options
 
 from hritest import search as qd
 from hritest.search.algorithms import MODEL_FREE
@@ -84,13 +84,7 @@ def run_for(run: Path, *, spec: Path, algorithm: str, seed: int, seconds: float,
         time_limit=seconds,
         seed=seed,
         backend=backend,
-        surrogate=qd.SurrogateOptions(
-            inner_iterations=args.inner_iterations,
-            device=args.device,
-            training=args.training,
-            inner_stall=args.inner_stall,
-            pipeline=args.pipeline,
-        ),
+        surrogate=surrogate_options(args),
     )
     (run / REACHED).write_text(f"{seconds}\n")
 
@@ -126,14 +120,8 @@ def main() -> None:
     parser.add_argument("--algorithms", default="random,map_elites,cma_mae,sas,dsas,auto")
     parser.add_argument("--minutes", default="5,15", help="the marks, comma-separated; runs last the longest")
     parser.add_argument("--seeds", type=int, default=3)
-    parser.add_argument("--inner-iterations", type=int, default=300, help="SAS and DSAS (auto sizes its own)")
-    parser.add_argument("--training", choices=["paper", "incremental"], default=None, help="default: the spec's")
-    parser.add_argument("--inner-stall", type=int, default=None, help="SAS and DSAS; default: the spec's")
-    parser.add_argument(
-        "--pipeline", action=argparse.BooleanOptionalAction, default=None, help="SAS and DSAS; default: the spec's"
-    )
+    add_surrogate_arguments(parser, inner_iterations=300, device="cpu")  # auto sizes its own inner loop
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--device", default="cpu")
     parser.add_argument("--out", type=Path, default=None)
     parser.add_argument("--reuse-stale", action="store_true", help="reuse runs made at another commit")
     args = parser.parse_args()
