@@ -121,9 +121,9 @@ def test_resume_refuses_evaluations_that_disagree_with_the_checkpoint(toy_spec, 
     refused(run, "evaluations.jsonl", "twice")
     (run / "evaluations.jsonl").write_text("".join([lines[0], "{not json\n", *lines[2:]]))
     refused(run, "evaluations.jsonl:2 is corrupt")
-    other = json.loads(lines[5]) | {"seed": 1}  # an evaluation of another run
+    other = json.loads(lines[5]) | {"seed": 1}  # an evaluation of another run (lines are in arrival order)
     (run / "evaluations.jsonl").write_text("".join([*lines[:5], json.dumps(other) + "\n", *lines[6:]]))
-    refused(run, "evaluation 5 is not one of this run's")
+    refused(run, f"evaluation {other['index']} is not one of this run's")
     (run / "evaluations.jsonl").write_text("".join(lines))
 
     state = load_state(RunDirectory.open(run))
