@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import itertools
 import json
 import math
 from types import SimpleNamespace
@@ -58,10 +59,14 @@ def test_auto_measures_each_arm_then_spends_each_stint_on_the_best_rate(toy_spec
             assert rates[first["arm"]] == max(rates.values())
         elif first["reason"] != "first measurement":  # a losing arm, measured again
             assert first["reason"].startswith("re-measure") and rates[first["arm"]] < max(rates.values())
-    # A stint lasts at least its quantum, and measuring other arms than the best took at most
-    # the allowed share of the run (give or take the stint that crossed it).
+    # A stint lasts at least its quantum, and measuring arms that did not come out best took at
+    # most the allowed share of the run (give or take the stint that crossed it).
     assert all(sum(b["seconds"] for b in stint) >= 0.2 for stint in stints[:-1])
-    explored = [sum(b["seconds"] for b in s) for s in stints[1:] if s[0]["reason"] != "best rate"]
+    explored = [
+        sum(b["seconds"] for b in s)
+        for s, after in itertools.pairwise(stints[1:])
+        if s[0]["reason"] != "best rate" and after[0]["rates"][s[0]["arm"]] < max(after[0]["rates"].values())
+    ]
     spent = sum(b["seconds"] for b in batches)
     assert explored and sum(explored) <= 0.6 * spent + max(explored)
     assert sum(b["evaluations"] for b in batches) == found.state.evaluations == 4000
@@ -169,3 +174,31 @@ def test_only_an_arm_that_adapts_is_warmed_up_over_several_batches(toy_spec):
     batch = {arm: proposer.arms[arm].batch_size for arm in ARMS[:-1]}
     assert proposer._expected_seconds("map_elites") == pytest.approx(batch["map_elites"] * 0.4)
     assert proposer._expected_seconds("cma_mae") == pytest.approx(auto.WARMUP * batch["cma_mae"] * 0.4)
+
+
+def test_a_measurement_that_made_its_arm_the_best_is_not_counted_as_exploring(toy_spec):
+    # Counted, a noisy re-measurement that won spent the exploring share on the winner, and the
+    # arm it displaced could no longer be measured again (collaboration: Random ran the last
+    # two minutes alone).
+    proposer = auto.Auto(load_domain(toy_spec()), seed=0, options=qd.SurrogateOptions())
+
+    def stint(number: int, arm: str, reason: str, rates: dict[str, float]) -> auto.Batch:
+        return auto.Batch(
+            batch=number + 1, stint=number, arm=arm, reason=reason, evaluations=10, seconds=2.0, gain=1.0,
+            pace=1.0, rates=rates,
+        )  # fmt: skip
+
+    proposer.history = [
+        stint(0, "random", "first measurement", {}),
+        stint(1, "map_elites", "first measurement", {"random": 1.0}),  # won: map_elites best next
+        stint(2, "map_elites", "best rate", {"random": 1.0, "map_elites": 1.5}),
+        stint(3, "random", "re-measure (best: map_elites)", {"random": 1.0, "map_elites": 1.2}),  # lost
+        stint(4, "map_elites", "best rate", {"random": 0.8, "map_elites": 1.2}),
+        stint(5, "random", "re-measure (best: map_elites)", {"random": 0.8, "map_elites": 0.9}),  # won
+        stint(6, "random", "best rate", {"random": 1.1, "map_elites": 0.9}),
+    ]
+    assert proposer._explored() == 2.0
+    # The last stint is judged by the scores now: random's re-measurement, if it is the last.
+    proposer.history = proposer.history[:-1]
+    won = proposer.score("random") >= proposer.score("map_elites")
+    assert proposer._explored() == (2.0 if won else 4.0)
