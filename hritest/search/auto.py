@@ -263,9 +263,7 @@ class Auto:
         3 minutes, MAP-Elites' next re-measurement no longer fitted, and Random, judged from then
         on against its own pace, ran the last 2 minutes alone (0.93 of MAP-Elites). Whether a
         stint's arm came out best: its score at the next stint's start, or now for the last one."""
-        stints: dict[int, list[Batch]] = {}
-        for b in self.history:
-            stints.setdefault(b.stint, []).append(b)
+        stints = _by_stint(self.history)
         now = {arm: self.score(arm) for arm in ARMS if self._batches(arm)}
         seconds = 0.0
         for number, stint in stints.items():
@@ -343,10 +341,7 @@ class Auto:
 
     def _stints(self, arm: str) -> list[list[Batch]]:
         """``arm``'s stints, each its batches, in order."""
-        stints: dict[int, list[Batch]] = {}
-        for b in self._batches(arm):
-            stints.setdefault(b.stint, []).append(b)
-        return list(stints.values())
+        return list(_by_stint(self._batches(arm)).values())
 
     def _simulation_seconds(self) -> float:
         """What simulating a surrogate batch should take: its last size (at first, 100) at the
@@ -396,6 +391,14 @@ class Auto:
             asdict(b) | {"pace": round(b.pace, 4), "rate": round(b.rate, 4), "relative": round(b.relative, 4)}
             for b in self.history
         ]
+
+
+def _by_stint(batches: list[Batch]) -> dict[int, list[Batch]]:
+    """``batches`` grouped by stint, in order."""
+    stints: dict[int, list[Batch]] = {}
+    for b in batches:
+        stints.setdefault(b.stint, []).append(b)
+    return stints
 
 
 def _ratio(gain: float, expected: float) -> float:
