@@ -111,8 +111,9 @@ class SurrogateAssisted:
     """SAS (CMA-MAE inner loop) or DSAS (CMA-MAEGA inner loop), the paper's Algorithm 1.
 
     The first ``initial_evaluations`` proposals are uniform in the bounds. After that, each ask
-    is one outer iteration: retrain the surrogate on every evaluation so far, search it from
-    scratch, and propose one random surrogate elite per block of the selection grid. Each
+    is one outer iteration: train the surrogate on the evaluations so far (all of them each time,
+    as the paper, or the new ones and as many replayed: ``training``), search it from scratch, and
+    propose one random surrogate elite per block of the selection grid. Each
     proposal's prediction is kept, so that once simulated it measures the surrogate's accuracy
     on data it was not trained on (the paper's held-out evaluation).
 

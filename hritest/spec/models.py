@@ -388,15 +388,15 @@ class SurrogateSettings(Strict):
     batch_size: BatchSize = 64
     learning_rate: PositiveFloat = 1e-4
     training: Literal["paper", "incremental"] = Field(
-        "paper",
-        description="paper: each outer iteration trains `epochs` passes over every evaluation so far (its cost "
-        "grows with the run); incremental: the warm networks train on the new evaluations and as many replayed "
-        "old ones (a flat cost per iteration)",
+        "incremental",
+        description="incremental: the warm networks train on the new evaluations and as many replayed old ones "
+        "(a flat cost per outer iteration); paper: each outer iteration trains `epochs` passes over every "
+        "evaluation so far (its cost grows with the run: the bundled specs of the paper's experiments set it)",
     )
     inner_stall: PositiveInt | None = Field(
-        None,
+        50,
         description="stop an inner loop once its archive's QD-score has not grown by 1% in this many iterations "
-        "(default: always run inner_iterations, as the paper)",
+        "(null: always run inner_iterations, as the paper and its bundled specs)",
     )
     pipeline: bool = Field(
         False,

@@ -333,13 +333,14 @@ def test_sas_and_dsas_search_a_task_without_grids_and_resume(toy_spec, tmp_path,
 
 
 def pipelined_spec(toy_spec, *, delay: float, inner_iterations: int = 20) -> Path:
-    """The toy domain searched by a pipelined SAS, each episode sleeping ``delay`` seconds."""
+    """The toy domain searched by a pipelined SAS, each episode sleeping ``delay`` seconds. With the
+    paper's training, a fit's samples say which batches it had been told."""
     text = (FIXTURES / "toy.yaml").read_text()
     text = text.replace("time_limit: 10.0\n", f"time_limit: 10.0\n  params: {{delay: {delay}}}\n")
     text = text.replace(
         "algorithm: cma_mae",
         "algorithm: sas\n  surrogate: {initial_evaluations: 30, inner_iterations: "
-        f"{inner_iterations}, epochs: 5, batch_size: 16, pipeline: true}}",
+        f"{inner_iterations}, epochs: 5, batch_size: 16, pipeline: true, training: paper}}",
     )
     return toy_spec(text=text)
 
