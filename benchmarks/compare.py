@@ -48,7 +48,8 @@ def same_run(run: Path, *, algorithm: str, evals: int, seed: int, surrogate: dic
     wanted = {"algorithm": algorithm, "budget": evals, "seed": seed, "spec_digest": digest(spec)}
     if algorithm in SURROGATE:
         wanted |= surrogate
-    meta = {"training": "paper", "inner_stall": None, "pipeline": False, **meta}  # runs from before these entries
+    before = {"training": "paper", "inner_stall": None, "pipeline": False, "time_share": 1.0}  # runs without these
+    meta = before | meta
     return all(meta.get(k) == v for k, v in wanted.items())
 
 
@@ -74,6 +75,12 @@ def add_surrogate_arguments(parser: argparse.ArgumentParser, *, inner_iterations
     parser.add_argument(
         "--pipeline", action=argparse.BooleanOptionalAction, default=None, help="SAS and DSAS; default: the spec's"
     )
+    parser.add_argument(
+        "--time-share",
+        type=float,
+        default=None,
+        help="SAS and DSAS; default: the spec's (1: the surrogate is never cut)",
+    )
     parser.add_argument("--device", default=device)
 
 
@@ -84,6 +91,7 @@ def surrogate_options(args: argparse.Namespace) -> qd.SurrogateOptions:
         training=args.training,
         inner_stall=args.inner_stall,
         pipeline=args.pipeline,
+        time_share=args.time_share,
     )
 
 
@@ -98,14 +106,8 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args()
     algorithms = [a.strip() for a in args.algorithms.split(",") if a.strip()]
-    settings = load_spec(args.spec).search.surrogate
-    inner_iterations = args.inner_iterations or settings.inner_iterations
-    surrogate = {
-        "inner_iterations": inner_iterations,
-        "training": args.training or settings.training,
-        "inner_stall": args.inner_stall or settings.inner_stall,
-        "pipeline": settings.pipeline if args.pipeline is None else args.pipeline,
-    }
+    settings = surrogate_options(args).applied_to(load_spec(args.spec).search.surrogate)
+    surrogate = settings.model_dump(include={"inner_iterations", "training", "inner_stall", "pipeline", "time_share"})
     out = args.out or Path("benchmark-runs") / f"{args.spec.stem}-{time.strftime('%Y%m%d-%H%M%S')}"
 
     results: dict[str, list[dict[str, float]]] = {a: [] for a in algorithms}
@@ -145,8 +147,9 @@ def main() -> None:
     random_qd = statistics.fmean(r["qd_score"] for r in results["random"]) if "random" in results else None
     lines = [
         f"{args.spec.name}: {args.evals} evaluations, {args.seeds} seeds, inner iterations "
-        f"{inner_iterations:,} (SAS, DSAS), training {surrogate['training']}, inner stall "
-        f"{surrogate['inner_stall'] or 'none'}, pipeline {surrogate['pipeline']}, {args.workers} workers",
+        f"{settings.inner_iterations:,} (SAS, DSAS), training {settings.training}, inner stall "
+        f"{settings.inner_stall or 'none'}, pipeline {settings.pipeline}, time share {settings.time_share}, "
+        f"{args.workers} workers",
         "",
         "| algorithm | QD-score | normalised QD-score | coverage | best | wall s | evaluations / s "
         "| QD-score / Random |",

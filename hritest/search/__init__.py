@@ -101,12 +101,11 @@ def start(
         )
     ref = DomainRef(spec=str(Path(spec_file).resolve()), base=str(Path(spec_file).resolve().parent))
     meta = {"algorithm": algorithm, "budget": budget, "time_limit": time_limit, "seed": seed, "spec_base": ref.base}
+    chosen = surrogate.applied_to(settings.surrogate)
     if algorithm in (*SURROGATE, "auto"):  # what decides a surrogate's cost and quality besides the budget
-        meta["inner_iterations"] = surrogate.inner_iterations or settings.surrogate.inner_iterations
-        meta["training"] = surrogate.training or settings.surrogate.training
-        meta["inner_stall"] = surrogate.inner_stall or settings.surrogate.inner_stall
-    if algorithm in SURROGATE:  # auto's SAS arm is never pipelined: its stints measure one arm at a time
-        meta["pipeline"] = settings.surrogate.pipeline if surrogate.pipeline is None else surrogate.pipeline
+        meta |= chosen.model_dump(include={"inner_iterations", "training", "inner_stall"})
+    if algorithm in SURROGATE:  # auto's SAS arm is never pipelined and has its time set by auto
+        meta |= chosen.model_dump(include={"pipeline", "time_share"})
     evaluator = backend.evaluator(ref)  # before the folder exists: a bad backend leaves nothing behind
     try:
         run = RunDirectory.create(root=root, spec_file=spec_file, name=spec.name, folder=out, meta=meta)

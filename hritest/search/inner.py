@@ -35,12 +35,14 @@ class SurrogateObjective:
         self.network = surrogate.refolded()  # the surrogate as trained now; rebuilt each outer iteration
         self.penalty = Penalty(domain.repair.penalty_terms(), surrogate.device)
         self.region_axes = len(archives.workspace_objects(domain)) > 0
+        self.calls = 0  # batches scored: the inner loop's iterations
 
     def _outputs(self, x: torch.Tensor) -> torch.Tensor:
         predicted = self.network(self.clip(x))
         return torch.cat([predicted[:, :1] - self.penalty(x)[:, None], predicted[:, 1:]], dim=1)
 
     def __call__(self, solutions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        self.calls += 1
         with torch.inference_mode():
             x = torch.as_tensor(solutions, dtype=torch.float32, device=self.device)
             out = self._outputs(x)

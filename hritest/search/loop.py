@@ -62,6 +62,7 @@ class _AheadView:
     def __init__(self, search: Search) -> None:
         self.search, self.domain, self.run_dir = search, search.domain, search.run_dir
         self.evaluated, self.qd_score = search.evaluated, search.qd_score
+        self.simulation_seconds = search.simulation_seconds
         self.data = search.dataset(before=search.evaluated)
 
     @property
@@ -257,6 +258,16 @@ class Search:
     def seconds_left(self) -> float:
         """Until the time limit (infinite without one)."""
         return math.inf if self.deadline is None else self.deadline - time.monotonic()
+
+    @property
+    def simulation_seconds(self) -> float | None:
+        """What the last batch told took besides its proposing: simulating it, storing what came
+        back and the checkpoint (None before the first)."""
+        rows = self.state.progress
+        if not rows:
+            return None
+        before = rows[-2].wall_time if len(rows) > 1 else 0.0
+        return max(rows[-1].wall_time - before - rows[-1].propose_seconds, 0.0)
 
     @property
     def qd_score(self) -> float:

@@ -20,6 +20,7 @@ from hritest.domain import Domain
 from hritest.records import EvaluationRecord
 from hritest.rundir import RunDirectory
 from hritest.search import archives, inner
+from hritest.spec.models import SurrogateSettings
 
 
 class SearchView(Protocol):
@@ -41,6 +42,12 @@ class SearchView(Protocol):
     @property
     def seconds_left(self) -> float:
         """Until the run's time limit (infinite without one)."""
+        ...
+
+    @property
+    def simulation_seconds(self) -> float | None:
+        """What the last batch told took besides its proposing: simulating it and storing what
+        came back (None before the first)."""
         ...
 
     def dataset(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -102,9 +109,19 @@ class SurrogateOptions:
 
     inner_iterations: int | None = None
     device: str = "auto"
-    training: str | None = None  # the spec's search.surrogate.training, unless given
-    inner_stall: int | None = None  # the spec's search.surrogate.inner_stall, unless given
-    pipeline: bool | None = None  # the spec's search.surrogate.pipeline, unless given
+    training: str | None = None
+    inner_stall: int | None = None
+    pipeline: bool | None = None
+    time_share: float | None = None
+
+    def applied_to(self, settings: SurrogateSettings) -> SurrogateSettings:
+        """The spec's ``search.surrogate`` with those of these options that were given (not None)."""
+        given = {
+            name: value
+            for name in ("inner_iterations", "training", "inner_stall", "pipeline", "time_share")
+            if (value := getattr(self, name)) is not None
+        }
+        return settings.model_copy(update=given)
 
 
 class SurrogateAssisted:
@@ -125,9 +142,9 @@ class SurrogateAssisted:
     def __init__(self, domain: Domain, *, gradients: bool, seed: int, options: SurrogateOptions) -> None:
         from hritest.surrogate.model import Surrogate, pick_device
 
-        settings = domain.spec.search.surrogate
+        settings = options.applied_to(domain.spec.search.surrogate)
         self.gradients, self.seed = gradients, seed
-        self.iterations = options.inner_iterations or settings.inner_iterations
+        self.iterations = settings.inner_iterations
         self.initial = settings.initial_evaluations
         self.rng = np.random.default_rng(seed)
         self.surrogate = Surrogate(
@@ -140,9 +157,8 @@ class SurrogateAssisted:
             device=pick_device(options.device),
             seed=seed,
         )
-        self.training = options.training or settings.training
-        self.stall = options.inner_stall or settings.inner_stall
-        self.pipeline = settings.pipeline if options.pipeline is None else options.pipeline
+        self.training, self.stall, self.pipeline = settings.training, settings.inner_stall, settings.pipeline
+        self.time_share = settings.time_share
         self.trained = 0  # samples the surrogate had seen at its last fit
         self.outer = 0
         # Per batch asked and not yet told, oldest first: its outer iteration, proposals and their
@@ -153,14 +169,15 @@ class SurrogateAssisted:
 
     def ask(self, search: SearchView, *, seconds: float | None = None) -> np.ndarray:
         """One outer iteration's proposals. With ``seconds`` (or the run's time limit, if that
-        comes first), training takes at most about half of that time and the inner loop the rest
-        (``auto`` sizes it to what simulating the batch costs, so that the surrogate never takes
-        more of the run than the simulator)."""
+        comes first), training takes at most about half of that time and the inner loop the rest.
+        ``auto`` sizes ``seconds`` to what simulating the batch costs; without it, the spec's
+        ``time_share`` does, from what the last batch took (:meth:`_seconds`)."""
         space = search.domain.space
         done = search.evaluated
         if done < self.initial:
             return self.rng.uniform(space.lower, space.upper, size=(self.initial - done, space.dim))
         started = time.monotonic()
+        seconds = self._seconds(search) if seconds is None else seconds
         # Training and inner loop end by the run's time limit too: whatever they found is proposed.
         budget = min(math.inf if seconds is None else seconds, search.seconds_left)
         end = None if math.isinf(budget) else started + budget
@@ -175,15 +192,8 @@ class SurrogateAssisted:
         )
         self.trained = len(theta)
         self.outer += 1
-        self.fits.append(
-            {
-                "outer_iteration": self.outer,
-                "samples": fit.samples,
-                "occupancy_loss": fit.occupancy_loss,
-                "predictor_loss": fit.predictor_loss,
-            }
-        )
         search.phase("inner loop")
+        trained = time.monotonic()
         objective = inner.SurrogateObjective(search.domain, self.surrogate)
         archive = inner.exploit(
             search.domain,
@@ -194,11 +204,32 @@ class SurrogateAssisted:
             seed=int(self.rng.integers(2**31)),
             deadline=end,
         )
+        self.fits.append(
+            {
+                "outer_iteration": self.outer,
+                "samples": fit.samples,
+                "occupancy_loss": fit.occupancy_loss,
+                "predictor_loss": fit.predictor_loss,
+                "seconds_allowed": None if end is None else round(budget, 3),
+                "training_seconds": round(trained - started, 3),
+                "inner_iterations": objective.calls,
+                "inner_loop_seconds": round(time.monotonic() - trained, 3),
+            }
+        )
         proposals = inner.downsample(search.domain, archive, rng=self.rng)
         if len(proposals) == 0:  # an empty surrogate archive: explore instead of stalling
             proposals = self.rng.uniform(space.lower, space.upper, size=(8, space.dim))
         self.predictions.append((self.outer, proposals, self.surrogate.predict(proposals)))
         return proposals
+
+    def _seconds(self, search: SearchView) -> float | None:
+        """What an outer iteration's surrogate work may take to keep to ``time_share`` of the run:
+        the share of it over the rest, times what the last batch took besides its proposing (on a
+        domain whose scenarios take milliseconds, a fraction of a second; None: no cut)."""
+        simulated = search.simulation_seconds
+        if self.time_share >= 1 or simulated is None:
+            return None
+        return simulated * self.time_share / (1 - self.time_share)
 
     def can_ask_ahead(self, search: SearchView) -> bool:
         """Whether the loop may ask for the next batch before the one simulating is told: with
@@ -218,11 +249,18 @@ class SurrogateAssisted:
         return np.concatenate([np.sort(old), new])
 
     def __setstate__(self, state: dict) -> None:
-        # Checkpoints written before the incremental schedule existed trained the paper's way; those
-        # from before pipelining kept one batch's predictions without its proposals (dropped: that
-        # batch's held-out errors go unmeasured).
+        # Checkpoints written before the incremental schedule existed trained the paper's way, and
+        # those from before time_share never cut its work; those from before pipelining kept one
+        # batch's predictions without its proposals (dropped: their held-out errors go unmeasured).
         state.pop("pending_predictions", None)
-        before = {"training": "paper", "stall": None, "trained": 0, "pipeline": False, "predictions": []}
+        before = {
+            "training": "paper",
+            "stall": None,
+            "trained": 0,
+            "pipeline": False,
+            "predictions": [],
+            "time_share": 1.0,
+        }
         self.__dict__.update({**before, **state})
 
     def tell(self, search: SearchView, records: list[EvaluationRecord], solutions: np.ndarray) -> None:

@@ -404,6 +404,15 @@ class SurrogateSettings(Strict):
         "the evaluations told so far (one batch behind the paper's schedule), so that the workers never wait "
         "for it; for machines with cores or a GPU beyond the workers",
     )
+    time_share: float = Field(
+        0.5,
+        gt=0,
+        le=1,
+        description="the most of the run's time the surrogate's training and inner loop may take: each outer "
+        "iteration's are cut at time_share / (1 - time_share) times what the last batch took to simulate, so that "
+        "the workers are not left idle for a surrogate that only refines its proposals (1: never cut, as the paper "
+        "and its bundled specs)",
+    )
 
 
 class SearchSpec(Strict):

@@ -21,6 +21,7 @@ from typer.testing import CliRunner
 from hritest import search as qd
 from hritest.cli import app
 from hritest.interrupt import Interrupted
+from hritest.report import load_run
 from hritest.rundir import RunDirectory, RunDirectoryError, unpack
 from hritest.search.state import load_state
 
@@ -297,6 +298,30 @@ def test_the_command_line_search_ends_with_a_report_and_exit_1_for_failures(toy_
 
 
 @pytest.mark.parametrize("algorithm", ["sas", "dsas"])
+def test_time_share_cuts_each_outer_iteration_to_what_simulating_a_batch_takes(toy_spec, tmp_path, algorithm):
+    """With a share far below what 2,000 inner iterations cost next to a toy batch's simulation,
+    every inner loop is cut; with ``time_share: 1`` none is."""
+    surrogate = "{initial_evaluations: 30, inner_iterations: %d, inner_stall: null, epochs: 5, time_share: %s}"
+    runs = {}
+    for share, iterations in (("0.01", 2000), ("1", 20)):
+        spec = toy_spec("budget: 500", f"budget: 500\n  surrogate: {surrogate % (iterations, share)}")
+        runs[share] = qd.start(
+            spec_file=spec, out=tmp_path / share, algorithm=algorithm, budget=90, seed=0, backend=TWO
+        )
+    cut, whole = (runs[share].state for share in ("0.01", "1"))
+    assert len(cut.proposer.fits) >= 2 and len(whole.proposer.fits) >= 2
+    walls = [0.0, *(row.wall_time for row in cut.progress)]
+    for k, fit in enumerate(cut.proposer.fits):  # fit k follows batch k
+        simulated = walls[k + 1] - walls[k] - cut.progress[k].propose_seconds
+        assert 1 <= fit["inner_iterations"] < 2000
+        assert fit["seconds_allowed"] == pytest.approx(simulated * 0.01 / 0.99, abs=1e-3)
+    assert all(f["inner_iterations"] == 20 and f["seconds_allowed"] is None for f in whole.proposer.fits)
+    assert json.loads((tmp_path / "1" / "run.json").read_text())["time_share"] == 1
+    stored = load_run(tmp_path / "0.01").surrogate["fits"]  # surrogate.json
+    assert [f["inner_iterations"] for f in stored] == [f["inner_iterations"] for f in cut.proposer.fits]
+
+
+@pytest.mark.parametrize("algorithm", ["sas", "dsas"])
 def test_sas_and_dsas_search_a_task_without_grids_and_resume(toy_spec, tmp_path, algorithm):
     """The toy task declares no occupancy grids: the surrogate learns from theta alone."""
     spec = toy_spec(
@@ -326,7 +351,7 @@ def test_sas_and_dsas_search_a_task_without_grids_and_resume(toy_spec, tmp_path,
     assert sorted(r.index for r in RunDirectory.open(tmp_path / "run").evaluations()) == list(range(80))
     assert again.state.proposer.outer > proposer.outer
 
-    from hritest.report import load_run, write_report
+    from hritest.report import write_report
 
     assert np.isnan(load_run(tmp_path / "run").surrogate["fits"][0]["occupancy_loss"])  # surrogate.json
     assert write_report(tmp_path / "run", recordings=0).is_file()
@@ -340,7 +365,7 @@ def pipelined_spec(toy_spec, *, delay: float, inner_iterations: int = 20) -> Pat
     text = text.replace(
         "algorithm: cma_mae",
         "algorithm: sas\n  surrogate: {initial_evaluations: 30, inner_iterations: "
-        f"{inner_iterations}, epochs: 5, batch_size: 16, pipeline: true, training: paper}}",
+        f"{inner_iterations}, epochs: 5, batch_size: 16, pipeline: true, training: paper, time_share: 1}}",
     )
     return toy_spec(text=text)
 

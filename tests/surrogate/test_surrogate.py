@@ -264,21 +264,11 @@ def test_a_fit_past_its_deadline_stops_after_one_batch_even_mid_epoch(teleop_dat
     assert optimizer_steps(late.occupancy_optimizer) == optimizer_steps(late.predictor_optimizer) == 1
 
 
-class Counting(SurrogateObjective):
-    """The surrogate objective, counting the inner loop's iterations (one call each)."""
-
-    calls = 0
-
-    def __call__(self, solutions):
-        self.calls += 1
-        return super().__call__(solutions)
-
-
 def test_an_inner_loop_stops_once_its_archive_stops_growing(teleop_data):
     domain, theta, grids, targets = teleop_data
     model = surrogate_for(domain)
     model.fit(theta, grids, targets)
-    full, early = Counting(domain, model), Counting(domain, model)
+    full, early = SurrogateObjective(domain, model), SurrogateObjective(domain, model)
     exploit(domain, full, gradients=False, iterations=300, seed=1)
     archive = exploit(domain, early, gradients=False, iterations=300, seed=1, stall=5)
     assert full.calls == 300
@@ -289,8 +279,8 @@ def test_incremental_training_sees_the_new_samples_and_as_many_old_ones(tmp_path
     text = (SPECS / "teleop.yaml").read_text()
     old = "surrogate: {initial_evaluations: 100, inner_iterations: 10000, downsample_cells: [5, 20],"
     new = "surrogate: {initial_evaluations: 30, inner_iterations: 20, downsample_cells: [3, 5], epochs: 5,"
-    assert "training: paper, inner_stall: null}" in text
-    text = text.replace("training: paper, inner_stall: null}", "training: incremental, inner_stall: 5}")
+    assert "training: paper, inner_stall: null, time_share: 1}" in text
+    text = text.replace("training: paper, inner_stall: null, time_share: 1}", "training: incremental, inner_stall: 5}")
     assert old in text
     (tmp_path / "teleop.yaml").write_text(text.replace(old, new))
     found = qd.start(
