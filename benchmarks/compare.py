@@ -107,7 +107,7 @@ def main() -> None:
     args = parser.parse_args()
     algorithms = [a.strip() for a in args.algorithms.split(",") if a.strip()]
     settings = surrogate_options(args).applied_to(load_spec(args.spec).search.surrogate)
-    surrogate = settings.model_dump(include={"inner_iterations", "training", "inner_stall", "pipeline", "time_share"})
+    surrogate = settings.model_dump(include=set(qd.SurrogateOptions.SETTINGS))
     out = args.out or Path("benchmark-runs") / f"{args.spec.stem}-{time.strftime('%Y%m%d-%H%M%S')}"
 
     results: dict[str, list[dict[str, float]]] = {a: [] for a in algorithms}

@@ -105,7 +105,7 @@ class Auto:
                 options=replace(
                     options,
                     training="incremental",
-                    inner_stall=options.inner_stall or domain.spec.search.surrogate.inner_stall or STALL,
+                    inner_stall=options.applied_to(domain.spec.search.surrogate).inner_stall or STALL,
                 ),
             ),
         }

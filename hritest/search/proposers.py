@@ -114,13 +114,11 @@ class SurrogateOptions:
     pipeline: bool | None = None
     time_share: float | None = None
 
+    SETTINGS = ("inner_iterations", "training", "inner_stall", "pipeline", "time_share")  # of search.surrogate
+
     def applied_to(self, settings: SurrogateSettings) -> SurrogateSettings:
         """The spec's ``search.surrogate`` with those of these options that were given (not None)."""
-        given = {
-            name: value
-            for name in ("inner_iterations", "training", "inner_stall", "pipeline", "time_share")
-            if (value := getattr(self, name)) is not None
-        }
+        given = {name: value for name in self.SETTINGS if (value := getattr(self, name)) is not None}
         return settings.model_copy(update=given)
 
 
