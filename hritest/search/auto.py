@@ -28,8 +28,8 @@ workers).
 All arms share what is simulated: SAS trains on every evaluation, and the model-free arms share one
 archive, which receives SAS's evaluations too. SAS runs here with the schedule whose cost follows
 its data (incremental training, an inner loop that stops when its archive stalls), and each outer
-iteration is given as much time as simulating its batch takes, so that the surrogate never takes
-more than about half of its stint.
+iteration's surrogate work is cut to the spec's ``time_share`` of it, from what simulating its
+batch takes (the default share, a third, where the spec never cuts: the paper's).
 
 Every batch's measurement and the choice behind it go to ``auto.json`` in the run directory (at
 each stint's end), and a summary per arm to ``run.json`` at the end.
@@ -49,6 +49,7 @@ from hritest.records import EvaluationRecord
 from hritest.rundir import RunDirectory
 from hritest.search import algorithms, archives
 from hritest.search.proposers import ModelFree, SearchView, SurrogateAssisted, SurrogateOptions
+from hritest.spec.models import SurrogateSettings
 
 ARMS = ("random", "map_elites", "cma_mae", "sas")
 PATIENCE = 4.0  # a losing arm waits this many times its last stint's seconds, doubled per loss
@@ -60,7 +61,9 @@ WARMUP = 3  # the first stint of an arm that adapts lasts at least this many of 
 ADAPTING = ("cma_mae", "sas")  # their batches depend on their own earlier ones: CMA-ES, the surrogate
 WINDOW = 2  # an arm's score: its gain over the pace's, in its last WINDOW stints
 PACE = 3  # the pace: the search's rate over the last PACE stints' worth of time
-STALL = 50  # SAS's inner loop stops when its archive has not grown in this many iterations
+# SAS's inner loop stall and surrogate share where the spec has none (the paper's specs): the defaults
+STALL = SurrogateSettings.model_fields["inner_stall"].default
+SHARE = SurrogateSettings.model_fields["time_share"].default
 FILE = "auto.json"
 
 
@@ -94,6 +97,10 @@ class Auto:
     def __init__(self, domain: Domain, *, seed: int, options: SurrogateOptions) -> None:
         shared = archives.search_archive(domain, seed=seed)
         self.seed, self.shared = seed, shared
+        settings = options.applied_to(domain.spec.search.surrogate)
+        # auto always cuts the surrogate's work: a spec that never does (time_share 1, as the
+        # paper's) gets the default share, or its SAS would take most of a slow domain's stints.
+        self.share = settings.time_share if settings.time_share < 1 else SHARE
         self.arms = {
             "random": ModelFree(algorithms.scheduler(domain, "random", shared, seed=seed)),
             "map_elites": ModelFree(algorithms.scheduler(domain, "map_elites", shared, seed=seed)),
@@ -103,9 +110,7 @@ class Auto:
                 gradients=False,
                 seed=seed,
                 options=replace(
-                    options,
-                    training="incremental",
-                    inner_stall=options.applied_to(domain.spec.search.surrogate).inner_stall or STALL,
+                    options, training="incremental", inner_stall=settings.inner_stall or STALL, time_share=self.share
                 ),
             ),
         }
@@ -127,6 +132,11 @@ class Auto:
         # pending at a checkpoint is told, but not measured.
         return {**self.__dict__, "asked": None}
 
+    def __setstate__(self, state: dict) -> None:
+        # Checkpoints from before the share gave SAS as long as simulating its batch took: 0.5.
+        self.__dict__ = {"share": 0.5, **state}
+        self.arms["sas"].time_share = self.share
+
     def ask(self, search: SearchView) -> np.ndarray:
         if not self._continues(search):
             if self.history:
@@ -141,7 +151,7 @@ class Auto:
             self.rates = {arm: round(self.score(arm), 4) for arm in ARMS if self._batches(arm)}
         self.asked = (time.monotonic(), search.qd_score)
         if self.choice == "sas":
-            return self.arms["sas"].ask(search, seconds=self._simulation_seconds())
+            return self.arms["sas"].ask(search, simulated=self._simulation_seconds())
         return self.arms[self.choice].ask(search)
 
     def tell(self, search: SearchView, records: list[EvaluationRecord], solutions: np.ndarray) -> None:
@@ -301,8 +311,8 @@ class Auto:
         (for SAS, as long again for training and inner loop), :data:`WARMUP` for an arm that adapts."""
         if done := self._batches(arm):
             return max(self.quantum(), done[-1].seconds)
-        if arm == "sas":
-            batch = 2 * self._simulation_seconds()
+        if arm == "sas":  # simulating, and the surrogate's share besides
+            batch = self._simulation_seconds() / (1 - self.share)
         else:
             batch = self.arms[arm].batch_size * self._seconds_per_evaluation()
         return max(self.quantum(), (WARMUP if arm in ADAPTING else 1) * batch)

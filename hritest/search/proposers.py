@@ -165,17 +165,17 @@ class SurrogateAssisted:
         self.held_out: list[tuple[int, list[float], list[float]]] = []  # (outer iteration, predicted, true)
         self.fits: list[dict] = []
 
-    def ask(self, search: SearchView, *, seconds: float | None = None) -> np.ndarray:
-        """One outer iteration's proposals. With ``seconds`` (or the run's time limit, if that
-        comes first), training takes at most about half of that time and the inner loop the rest.
-        ``auto`` sizes ``seconds`` to what simulating the batch costs; without it, the spec's
-        ``time_share`` does, from what the last batch took (:meth:`_seconds`)."""
+    def ask(self, search: SearchView, *, simulated: float | None = None) -> np.ndarray:
+        """One outer iteration's proposals. Its training and inner loop end by the time that
+        ``time_share`` allows for ``simulated`` seconds of simulating a batch (by default what the
+        last batch took; ``auto``, whose arms take turns, says what its SAS batches take) or by
+        the run's time limit, whichever comes first; training gets about half of it."""
         space = search.domain.space
         done = search.evaluated
         if done < self.initial:
             return self.rng.uniform(space.lower, space.upper, size=(self.initial - done, space.dim))
         started = time.monotonic()
-        seconds = self._seconds(search) if seconds is None else seconds
+        seconds = self._seconds(search.simulation_seconds if simulated is None else simulated)
         # Training and inner loop end by the run's time limit too: whatever they found is proposed.
         budget = min(math.inf if seconds is None else seconds, search.seconds_left)
         end = None if math.isinf(budget) else started + budget
@@ -220,11 +220,10 @@ class SurrogateAssisted:
         self.predictions.append((self.outer, proposals, self.surrogate.predict(proposals)))
         return proposals
 
-    def _seconds(self, search: SearchView) -> float | None:
+    def _seconds(self, simulated: float | None) -> float | None:
         """What an outer iteration's surrogate work may take to keep to ``time_share`` of the run:
-        the share of it over the rest, times what the last batch took besides its proposing (on a
-        domain whose scenarios take milliseconds, a fraction of a second; None: no cut)."""
-        simulated = search.simulation_seconds
+        the share of it over the rest, times what simulating a batch takes (on a domain whose
+        scenarios take milliseconds, a fraction of a second; None: no cut)."""
         if self.time_share >= 1 or simulated is None:
             return None
         return simulated * self.time_share / (1 - self.time_share)

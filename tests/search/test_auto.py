@@ -176,6 +176,30 @@ def test_only_an_arm_that_adapts_is_warmed_up_over_several_batches(toy_spec):
     assert proposer._expected_seconds("cma_mae") == pytest.approx(auto.WARMUP * batch["cma_mae"] * 0.4)
 
 
+@pytest.mark.parametrize(
+    ("setting", "option", "share"),
+    [
+        ("", None, auto.SHARE),
+        ("  surrogate: {time_share: 0.2}\n", None, 0.2),
+        ("  surrogate: {time_share: 0.2}\n", 0.5, 0.5),
+        ("  surrogate: {time_share: 1}\n", None, auto.SHARE),  # the paper's specs never cut; auto does
+    ],
+)
+def test_sas_in_auto_keeps_the_surrogate_to_its_time_share_of_what_simulating_a_batch_takes(
+    toy_spec, setting, option, share
+):
+    spec = toy_spec()
+    spec.write_text(spec.read_text() + setting)
+    proposer = auto.Auto(load_domain(spec), seed=0, options=qd.SurrogateOptions(time_share=option))
+    # Random simulated 100 scenarios in 4 s: a first SAS batch of 100 should take as long.
+    proposer.history = [
+        auto.Batch(batch=1, stint=0, arm="random", reason="", evaluations=100, seconds=4.0, gain=1.0, rates={})
+    ]
+    proposer.spent = 4.0
+    assert proposer.arms["sas"]._seconds(proposer._simulation_seconds()) == pytest.approx(4.0 * share / (1 - share))
+    assert proposer._expected_seconds("sas") == pytest.approx(auto.WARMUP * 4.0 / (1 - share))
+
+
 def test_a_measurement_that_made_its_arm_the_best_is_not_counted_as_exploring(toy_spec):
     # Counted, a noisy re-measurement that won spent the exploring share on the winner, and the
     # arm it displaced could no longer be measured again (collaboration: Random ran the last
