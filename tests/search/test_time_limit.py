@@ -38,6 +38,11 @@ def assert_whole(run: Path) -> int:
     return len(indices)
 
 
+# The limit counts from the call, start-up included (workers, torch for SAS): 3 and 6 s left a loaded
+# 2-core machine no time to tell a batch.
+LIMIT = 10.0
+
+
 @pytest.mark.parametrize("algorithm", ["random", "sas"])
 def test_a_time_limit_alone_stops_the_search_in_time_and_loses_nothing(toy_spec, tmp_path, algorithm):
     run = tmp_path / "run"
@@ -45,16 +50,16 @@ def test_a_time_limit_alone_stops_the_search_in_time_and_loses_nothing(toy_spec,
         spec_file=slow_toy(toy_spec),
         out=run,
         algorithm=algorithm,
-        time_limit=3.0,
+        time_limit=LIMIT,
         seed=1,
         backend=TWO,
         surrogate=qd.SurrogateOptions(inner_iterations=20, device="cpu"),
     )
     meta = json.loads((run / "run.json").read_text())
-    assert meta["budget"] is None and meta["time_limit"] == 3.0 and meta["stopped"] == "time limit"
+    assert meta["budget"] is None and meta["time_limit"] == LIMIT and meta["stopped"] == "time limit"
     assert not found.done
     evaluated = assert_whole(run)
-    assert 0 < evaluated <= most_in(3.0)
+    assert 0 < evaluated <= most_in(LIMIT)
     # A batch cut short stays pending (a resume finishes it); what it evaluated is in the summaries.
     assert found.state.evaluations <= evaluated <= found.state.known
 
