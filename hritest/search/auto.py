@@ -151,7 +151,7 @@ class Auto:
             self.rates = {arm: round(self.score(arm), 4) for arm in ARMS if self._batches(arm)}
         self.asked = (time.monotonic(), search.qd_score)
         if self.choice == "sas":
-            return self.arms["sas"].ask(search, simulated=self._simulation_seconds())
+            return self.arms["sas"].ask(search, per_evaluation=self._seconds_per_evaluation())
         return self.arms[self.choice].ask(search)
 
     def tell(self, search: SearchView, records: list[EvaluationRecord], solutions: np.ndarray) -> None:
@@ -308,11 +308,12 @@ class Auto:
     def _expected_seconds(self, arm: str) -> float:
         """What a stint of ``arm`` should take: a quantum, or one of its batches if longer (as long
         as its last one). A first one: one batch of its size at the recent seconds per evaluation
-        (for SAS, as long again for training and inner loop), :data:`WARMUP` for an arm that adapts."""
+        (for SAS, of its largest size yet, and its surrogate's share of the time besides),
+        :data:`WARMUP` for an arm that adapts."""
         if done := self._batches(arm):
             return max(self.quantum(), done[-1].seconds)
-        if arm == "sas":  # simulating, and the surrogate's share besides
-            batch = self._simulation_seconds() / (1 - self.share)
+        if arm == "sas":
+            batch = self.arms["sas"].largest * self._seconds_per_evaluation() / (1 - self.share)
         else:
             batch = self.arms[arm].batch_size * self._seconds_per_evaluation()
         return max(self.quantum(), (WARMUP if arm in ADAPTING else 1) * batch)
@@ -352,12 +353,6 @@ class Auto:
     def _stints(self, arm: str) -> list[list[Batch]]:
         """``arm``'s stints, each its batches, in order."""
         return list(_by_stint(self._batches(arm)).values())
-
-    def _simulation_seconds(self) -> float:
-        """What simulating a surrogate batch should take: its last size (at first, 100) at the
-        recent seconds per evaluation."""
-        sas = self._batches("sas")
-        return (sas[-1].evaluations if sas else 100) * self._seconds_per_evaluation()
 
     def _seconds_per_evaluation(self) -> float:
         """The model-free arms' recent wall seconds per evaluation (proposing costs them next to

@@ -62,7 +62,7 @@ class _AheadView:
     def __init__(self, search: Search) -> None:
         self.search, self.domain, self.run_dir = search, search.domain, search.run_dir
         self.evaluated, self.qd_score = search.evaluated, search.qd_score
-        self.simulation_seconds = search.simulation_seconds
+        self.seconds_per_evaluation = search.seconds_per_evaluation
         self.data = search.dataset(before=search.evaluated)
 
     @property
@@ -260,14 +260,16 @@ class Search:
         return math.inf if self.deadline is None else self.deadline - time.monotonic()
 
     @property
-    def simulation_seconds(self) -> float | None:
-        """What the last batch told took besides its proposing: simulating it, storing what came
-        back and the checkpoint (None before the first)."""
+    def seconds_per_evaluation(self) -> float | None:
+        """What the last batch told took besides its proposing (simulating it, storing what came
+        back, the checkpoint) over its evaluations (None before the first; a batch cut short to
+        nothing by a time limit is skipped)."""
         rows = self.state.progress
-        if not rows:
-            return None
-        before = rows[-2].wall_time if len(rows) > 1 else 0.0
-        return max(rows[-1].wall_time - before - rows[-1].propose_seconds, 0.0)
+        for k in range(len(rows) - 1, -1, -1):
+            evaluations, wall_time = (rows[k - 1].evaluations, rows[k - 1].wall_time) if k else (0, 0.0)
+            if evaluated := rows[k].evaluations - evaluations:
+                return max(rows[k].wall_time - wall_time - rows[k].propose_seconds, 0.0) / evaluated
+        return None
 
     @property
     def qd_score(self) -> float:

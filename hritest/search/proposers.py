@@ -45,9 +45,9 @@ class SearchView(Protocol):
         ...
 
     @property
-    def simulation_seconds(self) -> float | None:
-        """What the last batch told took besides its proposing: simulating it and storing what
-        came back (None before the first)."""
+    def seconds_per_evaluation(self) -> float | None:
+        """What the last batch told took besides its proposing (simulating it, storing what came
+        back) over its evaluations (None before the first)."""
         ...
 
     def dataset(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -158,6 +158,7 @@ class SurrogateAssisted:
         self.training, self.stall, self.pipeline = settings.training, settings.inner_stall, settings.pipeline
         self.time_share = settings.time_share
         self.trained = 0  # samples the surrogate had seen at its last fit
+        self.largest = self.initial  # the largest batch proposed so far: what the time share is of
         self.outer = 0
         # Per batch asked and not yet told, oldest first: its outer iteration, proposals and their
         # predictions. Two are pending while a pipelined search asks ahead.
@@ -165,17 +166,17 @@ class SurrogateAssisted:
         self.held_out: list[tuple[int, list[float], list[float]]] = []  # (outer iteration, predicted, true)
         self.fits: list[dict] = []
 
-    def ask(self, search: SearchView, *, simulated: float | None = None) -> np.ndarray:
+    def ask(self, search: SearchView, *, per_evaluation: float | None = None) -> np.ndarray:
         """One outer iteration's proposals. Its training and inner loop end by the time that
-        ``time_share`` allows for ``simulated`` seconds of simulating a batch (by default what the
-        last batch took; ``auto``, whose arms take turns, says what its SAS batches take) or by
-        the run's time limit, whichever comes first; training gets about half of it."""
+        ``time_share`` allows for simulating a batch at ``per_evaluation`` seconds a scenario (by
+        default, as the last batch took; ``auto``, whose arms take turns, says what its model-free
+        arms' took) or by the run's time limit, whichever comes first; training gets about half."""
         space = search.domain.space
         done = search.evaluated
         if done < self.initial:
             return self.rng.uniform(space.lower, space.upper, size=(self.initial - done, space.dim))
         started = time.monotonic()
-        seconds = self._seconds(search.simulation_seconds if simulated is None else simulated)
+        seconds = self._seconds(search.seconds_per_evaluation if per_evaluation is None else per_evaluation)
         # Training and inner loop end by the run's time limit too: whatever they found is proposed.
         budget = min(math.inf if seconds is None else seconds, search.seconds_left)
         end = None if math.isinf(budget) else started + budget
@@ -202,6 +203,10 @@ class SurrogateAssisted:
             seed=int(self.rng.integers(2**31)),
             deadline=end,
         )
+        searched = time.monotonic()
+        proposals = inner.downsample(search.domain, archive, rng=self.rng)
+        if len(proposals) == 0:  # an empty surrogate archive: explore instead of stalling
+            proposals = self.rng.uniform(space.lower, space.upper, size=(8, space.dim))
         self.fits.append(
             {
                 "outer_iteration": self.outer,
@@ -211,22 +216,24 @@ class SurrogateAssisted:
                 "seconds_allowed": None if end is None else round(budget, 3),
                 "training_seconds": round(trained - started, 3),
                 "inner_iterations": objective.calls,
-                "inner_loop_seconds": round(time.monotonic() - trained, 3),
+                "inner_loop_seconds": round(searched - trained, 3),
+                "proposed": len(proposals),
             }
         )
-        proposals = inner.downsample(search.domain, archive, rng=self.rng)
-        if len(proposals) == 0:  # an empty surrogate archive: explore instead of stalling
-            proposals = self.rng.uniform(space.lower, space.upper, size=(8, space.dim))
         self.predictions.append((self.outer, proposals, self.surrogate.predict(proposals)))
+        self.largest = max(self.largest, len(proposals))
         return proposals
 
-    def _seconds(self, simulated: float | None) -> float | None:
+    def _seconds(self, per_evaluation: float | None) -> float | None:
         """What an outer iteration's surrogate work may take to keep to ``time_share`` of the run:
         the share of it over the rest, times what simulating a batch takes (on a domain whose
-        scenarios take milliseconds, a fraction of a second; None: no cut)."""
-        if self.time_share >= 1 or simulated is None:
+        scenarios take milliseconds, a fraction of a second; None: no cut). A batch as large as
+        the largest it proposed, not its last: a short inner loop fills few cells and proposes few
+        scenarios, and sized by those, the next would be shorter still (on teleoperation, batches
+        of one scenario and one inner iteration each, from the second round on)."""
+        if self.time_share >= 1 or per_evaluation is None:
             return None
-        return simulated * self.time_share / (1 - self.time_share)
+        return per_evaluation * self.largest * self.time_share / (1 - self.time_share)
 
     def can_ask_ahead(self, search: SearchView) -> bool:
         """Whether the loop may ask for the next batch before the one simulating is told: with
@@ -257,6 +264,7 @@ class SurrogateAssisted:
             "pipeline": False,
             "predictions": [],
             "time_share": 1.0,
+            "largest": state["initial"],
         }
         self.__dict__.update({**before, **state})
 

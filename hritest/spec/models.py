@@ -409,7 +409,8 @@ class SurrogateSettings(Strict):
         gt=0,
         le=1,
         description="the most of the run's time the surrogate's training and inner loop may take: each outer "
-        "iteration's are cut at time_share / (1 - time_share) times what the last batch took to simulate, so that "
+        "iteration's are cut at time_share / (1 - time_share) times what simulating a batch takes (as large as the "
+        "largest it proposed, at the last batch's seconds per scenario), so that "
         "the workers are not left idle for a surrogate that only refines its proposals (1: never cut, as the paper "
         "and its bundled specs)",
     )

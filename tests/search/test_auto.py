@@ -196,7 +196,7 @@ def test_sas_in_auto_keeps_the_surrogate_to_its_time_share_of_what_simulating_a_
         auto.Batch(batch=1, stint=0, arm="random", reason="", evaluations=100, seconds=4.0, gain=1.0, rates={})
     ]
     proposer.spent = 4.0
-    assert proposer.arms["sas"]._seconds(proposer._simulation_seconds()) == pytest.approx(4.0 * share / (1 - share))
+    assert proposer.arms["sas"]._seconds(proposer._seconds_per_evaluation()) == pytest.approx(4.0 * share / (1 - share))
     assert proposer._expected_seconds("sas") == pytest.approx(auto.WARMUP * 4.0 / (1 - share))
 
 

@@ -11,6 +11,7 @@ import threading
 import time
 from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import psutil
@@ -310,11 +311,14 @@ def test_time_share_cuts_each_outer_iteration_to_what_simulating_a_batch_takes(t
         )
     cut, whole = (runs[share].state for share in ("0.01", "1"))
     assert len(cut.proposer.fits) >= 2 and len(whole.proposer.fits) >= 2
-    walls = [0.0, *(row.wall_time for row in cut.progress)]
+    rows = [SimpleNamespace(evaluations=0, wall_time=0.0), *cut.progress]
+    largest = 30  # the initial batch: a fit's share is of a batch as large as the largest before it
     for k, fit in enumerate(cut.proposer.fits):  # fit k follows batch k
-        simulated = walls[k + 1] - walls[k] - cut.progress[k].propose_seconds
+        simulated = rows[k + 1].wall_time - rows[k].wall_time - rows[k + 1].propose_seconds
+        per_evaluation = simulated / (rows[k + 1].evaluations - rows[k].evaluations)
         assert 1 <= fit["inner_iterations"] < 2000
-        assert fit["seconds_allowed"] == pytest.approx(simulated * 0.01 / 0.99, abs=1e-3)
+        assert fit["seconds_allowed"] == pytest.approx(per_evaluation * largest * 0.01 / 0.99, abs=1e-3)
+        largest = max(largest, fit["proposed"])
     assert all(f["inner_iterations"] == 20 and f["seconds_allowed"] is None for f in whole.proposer.fits)
     assert json.loads((tmp_path / "1" / "run.json").read_text())["time_share"] == 1
     stored = load_run(tmp_path / "0.01").surrogate["fits"]  # surrogate.json
