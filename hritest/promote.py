@@ -56,8 +56,9 @@ def promote(run_path: Path, *, corpus: Path, top: int | None = None, shrink: boo
             f"{spec_file} changed since the run {run.path} started, so its failures would be "
             "stale at once; run a new search with the current spec and promote from that"
         )
-    records = {r.index: r for r in run.evaluations()}
-    ids = chosen([records[i] for i in replay.failure_ids(run, list(records.values()))], top)
+    reported = replay.failure_ids(run)
+    records = run.evaluations_of(reported)
+    ids = chosen([records[i] for i in reported if i in records], top)
     if not ids:
         return []
     domain = replay.run_domain(run)

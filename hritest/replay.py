@@ -142,7 +142,7 @@ def run_domain(run: RunDirectory, *, trust: bool = False) -> Domain:
     return load_domain(run.path / "spec.yaml", base=run.plugin_base(trust=trust))
 
 
-def failure_ids(run: RunDirectory, records: Sequence[EvaluationRecord]) -> list[int]:
+def failure_ids(run: RunDirectory) -> list[int]:
     """The ids of the run's reported failures (``failures.yaml``, worst first).
 
     A run killed before its first summary has no ``failures.yaml``; then every evaluation
@@ -152,7 +152,7 @@ def failure_ids(run: RunDirectory, records: Sequence[EvaluationRecord]) -> list[
     if path.is_file():
         data = yaml.safe_load(path.read_text()) or {}
         return [int(f["id"]) for f in data.get("failures") or []]
-    return [r.index for r in rank_failures(records)]
+    return [r.index for r in rank_failures(run.iter_evaluations())]
 
 
 def stored_failure(run: RunDirectory, failure_id: int) -> EvaluationRecord:
@@ -162,15 +162,15 @@ def stored_failure(run: RunDirectory, failure_id: int) -> EvaluationRecord:
         EmptyRunError: the run has no evaluations.
         UnknownFailureError: no such failure; the message lists the ids there are.
     """
-    records = run.evaluations()
-    if not records:
+    if not run.has_evaluations():
         raise EmptyRunError(f"{run.path} has no evaluations yet; there is nothing to replay")
-    ids = failure_ids(run, records)
-    if failure_id not in ids:
+    ids = failure_ids(run)
+    found = run.evaluations_of([failure_id]) if failure_id in ids else {}
+    if failure_id not in found:
         listed = ", ".join(map(str, ids[:50])) + (f", ... ({len(ids)} in all)" if len(ids) > 50 else "")
         known = f"its failures (worst first) are: {listed}" if ids else "it has no failures"
         raise UnknownFailureError(f"{run.path} has no failure with id {failure_id}; {known}")
-    return next(r for r in records if r.index == failure_id)
+    return found[failure_id]
 
 
 def replay_record(

@@ -48,7 +48,7 @@ import secrets
 import shutil
 import tarfile
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
@@ -374,8 +374,20 @@ class RunDirectory:
             handle.write(json.dumps(record.to_json(), separators=(",", ":")) + "\n")
 
     def evaluations(self) -> list[EvaluationRecord]:
-        """Every committed evaluation, in order (a torn last line from a kill is dropped)."""
+        """Every committed evaluation, in order (a torn last line from a kill is dropped). A long
+        run's records do not fit in memory: read those a command needs with
+        :meth:`evaluations_of`, or go through them with :meth:`iter_evaluations`."""
         return list(self.iter_evaluations())
+
+    def has_evaluations(self) -> bool:
+        """Whether the run has a committed evaluation (reading its first line only)."""
+        return next(self.iter_evaluations(), None) is not None
+
+    def evaluations_of(self, indices: Collection[int]) -> dict[int, EvaluationRecord]:
+        """The committed evaluations with these indices, by index, read one line at a time (a
+        million teleoperation records take gigabytes; a report needs a few hundred of them)."""
+        wanted = set(indices)
+        return {r.index: r for r in self.iter_evaluations() if r.index in wanted}
 
     def iter_evaluations(self) -> Iterator[EvaluationRecord]:
         """:meth:`evaluations` one at a time, for a run too long to hold in memory."""

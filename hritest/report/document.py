@@ -73,7 +73,7 @@ def run_document(
                 [
                     Text(
                         f"No failures: no elite of the result archive meets the failure condition '{spec.failure}' "
-                        f"after {len(data.records)} evaluations.",
+                        f"after {data.evaluated} evaluations.",
                         note=True,
                     )
                 ],
@@ -143,7 +143,6 @@ def run_document(
 
 def _glance(data: RunData) -> list:
     spec, meta, last = data.spec, data.meta, (data.progress[-1] if data.progress else {})
-    statuses = Counter(r.status.value for r in data.records)
     cells = spec.archive.cells if spec.archive.type == "cvt" else math.prod(m.cells for m in spec.measures)
     rows = [
         ("spec", f"{spec.name} ({meta.get('spec_file', 'spec.yaml')})"),
@@ -153,8 +152,8 @@ def _glance(data: RunData) -> list:
             f"{meta.get('algorithm', '?')}, seed {meta.get('seed', '?')}"
             + (f", {meta['inner_iterations']:,} inner iterations" if "inner_iterations" in meta else ""),
         ),
-        ("evaluations", f"{len(data.records)} {_limits(meta)}"),
-        ("statuses", ", ".join(f"{n} {s}" for s, n in sorted(statuses.items()))),
+        ("evaluations", f"{data.evaluated} {_limits(meta)}"),
+        ("statuses", ", ".join(f"{n} {s}" for s, n in sorted(data.statuses.items()))),
         ("wall time", f"{last['wall_time']:.1f} s" if "wall_time" in last else "not recorded"),
         ("QD-score", f"{last['qd_score']:.2f}" if "qd_score" in last else "not recorded"),
         (
@@ -412,7 +411,7 @@ def compare_document(runs: Sequence[RunData], *, link_base: Path) -> Document:
     for name, get in (
         ("spec", lambda d: d.spec.name),
         ("algorithm", lambda d: f"{d.meta.get('algorithm', '?')}, seed {d.meta.get('seed', '?')}"),
-        ("evaluations", lambda d: str(len(d.records))),
+        ("evaluations", lambda d: str(d.evaluated)),
         ("wall time", lambda d: f"{d.progress[-1]['wall_time']:.1f} s" if d.progress else "—"),
         ("QD-score", lambda d: f"{d.progress[-1]['qd_score']:.2f}" if d.progress else "—"),
         ("QD-score, normalised", lambda d: f"{d.progress[-1]['normalized_qd_score']:.4f}" if d.progress else "—"),

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,7 +22,8 @@ class RunData:
     path: Path
     meta: Mapping[str, Any]
     spec: Any  # hritest.spec.Spec
-    records: Sequence[EvaluationRecord]
+    evaluated: int  # committed evaluations
+    statuses: Mapping[str, int]  # how many of them ended with each status
     progress: Sequence[Mapping[str, float]]
     elites: Sequence[EvaluationRecord]
     failures: Sequence[EvaluationRecord]  # the reported failures, worst first
@@ -79,17 +81,21 @@ def load_run(path: Path, *, trust: bool = False) -> RunData:
     from hritest.spec import load_spec
 
     run = RunDirectory.open(path)
-    records = run.evaluations()
-    if not records:
+    if not run.has_evaluations():
         raise EmptyRunError(
             f"{run.path} has no evaluations yet; there is nothing to report. "
             "Run 'hritest search --resume' on it, or start a new search"
         )
     spec = load_spec(run.path / "spec.yaml")
-    by_index = {r.index: r for r in records}
-    elite_ids = _elite_ids(run, trust=trust)
+    elite_ids, reported = _elite_ids(run, trust=trust), failure_ids(run)
+    # One pass over the records, keeping only those shown: a million of them take gigabytes.
+    wanted, by_index, statuses = {*elite_ids, *reported}, {}, Counter()
+    for record in run.iter_evaluations():
+        statuses[record.status.value] += 1
+        if record.index in wanted:
+            by_index[record.index] = record
     surrogate, auto = run.path / "surrogate.json", run.path / "auto.json"
-    failures = [by_index[i] for i in failure_ids(run, records) if i in by_index]
+    failures = [by_index[i] for i in reported if i in by_index]
     clusters = cluster_failures(
         failures,
         measure_names=[m.name for m in spec.measures],
@@ -100,7 +106,8 @@ def load_run(path: Path, *, trust: bool = False) -> RunData:
         path=run.path,
         meta=run.meta,
         spec=spec,
-        records=records,
+        evaluated=sum(statuses.values()),
+        statuses=dict(statuses),
         progress=_read_progress(run.path / "progress.csv"),
         elites=[by_index[i] for i in elite_ids if i in by_index],
         failures=failures,

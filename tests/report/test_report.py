@@ -85,6 +85,24 @@ def test_report_shows_the_numbers_of_progress_csv(run, reported):
     assert "150 ok" in page  # the statuses
 
 
+def test_a_report_a_replay_and_a_promotion_keep_only_the_records_they_show(run, tmp_path, monkeypatch):
+    # Holding every record, the report of a million teleoperation evaluations took 3.3 GB: they
+    # read evaluations.jsonl one record at a time, keeping the elites and the reported failures.
+    from hritest.promote import promote
+    from hritest.replay import stored_failure
+
+    def every_record(self):
+        raise AssertionError("read every record of the run into memory")
+
+    monkeypatch.setattr(RunDirectory, "evaluations", every_record)
+    data = load_run(run)
+    assert data.evaluated == 150 and data.statuses == {"ok": 150}
+    ids = [f["id"] for f in failures_of(run)]
+    assert [r.index for r in data.failures] == ids and len(data.elites) > len(ids) > 0
+    assert stored_failure(RunDirectory.open(run), ids[-1]).index == ids[-1]
+    assert [p.evaluation for p in promote(run, corpus=tmp_path / "corpus", top=2)] == ids[:2]
+
+
 def test_report_lists_every_failure_and_links_recordings(run, reported):
     page = reported.read_text()
     failures = failures_of(run)
