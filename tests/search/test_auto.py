@@ -200,6 +200,23 @@ def test_sas_in_auto_keeps_the_surrogate_to_its_time_share_of_what_simulating_a_
     assert proposer._expected_seconds("sas") == pytest.approx(auto.WARMUP * 4.0 / (1 - share))
 
 
+def test_arms_never_measured_are_measured_the_cheapest_first_stint_first(toy_spec, monkeypatch):
+    # CMA-MAE's first stint is three of its batches of 8 x 37; SAS's three of 100 and the
+    # surrogate's share: SAS comes first, once there are data to train it on.
+    monkeypatch.setattr(auto, "EXPLORE", 1.0)
+    spec = toy_spec()
+    spec.write_text(spec.read_text() + "  emitter: {emitters: 8, batch_size: 37}\n")
+    proposer = auto.Auto(load_domain(spec), seed=0, options=qd.SurrogateOptions())
+    proposer.history = [
+        auto.Batch(batch=1, stint=0, arm="random", reason="", evaluations=100, seconds=4.0, gain=1.0, rates={}),
+        auto.Batch(batch=2, stint=1, arm="map_elites", reason="", evaluations=100, seconds=4.0, gain=1.0, rates={}),
+    ]
+    proposer.spent = 8.0
+    assert proposer._expected_seconds("sas") < proposer._expected_seconds("cma_mae")
+    assert proposer._choose(SimpleNamespace(seconds_left=math.inf, evaluated=200)) == ("sas", "first measurement")
+    assert proposer._choose(SimpleNamespace(seconds_left=math.inf, evaluated=99)) == ("cma_mae", "first measurement")
+
+
 def test_a_measurement_that_made_its_arm_the_best_is_not_counted_as_exploring(toy_spec):
     # Counted, a noisy re-measurement that won spent the exploring share on the winner, and the
     # arm it displaced could no longer be measured again (collaboration: Random ran the last
