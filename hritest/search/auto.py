@@ -9,7 +9,7 @@ guess: it treats Random, MAP-Elites, CMA-MAE and SAS as the arms of a bandit and
 workers).
 
 * **Stints, not batches.** An arm runs for a stint of at least a second and 3 % of the run so
-  far (and at least one of its batches; a first stint of CMA-MAE or SAS, :data:`WARMUP`): a
+  far (and at least one of its batches; a first stint of CMA-MAE, :data:`WARMUP`): a
   20-scenario batch that fills one cell more or less than the last says nothing. When CMA-MAE joins a search that
   others began, or comes back after they went on for :data:`PATIENCE` times its last stint, its
   emitters start afresh at the search's elites, not at the spec's ``x0`` or where they stopped.
@@ -17,7 +17,8 @@ workers).
   little about now: a stint's gain is compared with what the search's *pace* around it (its rate
   over the :data:`PACE` quanta of time before the stint and, once the search has gone on as long,
   after it) would have gained in the same seconds, and an arm's score is that ratio over its last
-  :data:`WINDOW` stints.
+  :data:`WINDOW` stints; SAS's over its latest alone, since its surrogate learns from every
+  evaluation and an older stint understates what it does now.
 * **Exploring costs a bounded share.** Each stint goes to the arm with the best score, except
   that arms never measured are measured first, one at a time and the cheapest first, and a losing
   arm again once the others have had :data:`PATIENCE` times its last stint (a patience that
@@ -58,8 +59,14 @@ EXPLORE = 0.08  # at most this share of the run measures arms that do not come o
 MIN_STINT = 1.0  # seconds: a stint lasts at least this long (and one batch of its arm)
 STINT_SHARE = 0.03  # and this share of the run so far
 WARMUP = 3  # the first stint of an arm that adapts lasts at least this many of its batches
-ADAPTING = ("cma_mae", "sas")  # their batches depend on their own earlier ones: CMA-ES, the surrogate
+ADAPTING = ("cma_mae",)  # its batches depend on its own earlier ones (CMA-ES's step size and covariance)
 WINDOW = 2  # an arm's score: its gain over the pace's, in its last WINDOW stints
+# Scored by its latest stint alone: the surrogate learns from every evaluation, the other arms'
+# too, so each stint of SAS starts from more data than the last and an older one understates it
+# (on collaboration, a first measurement at 10 s, on 120 evaluations, at 0.37 of the pace kept
+# SAS's score under MAP-Elites' for the 8 minutes after a stint at 1.02). For the same reason it
+# needs no warm-up: its first batch is what any of its batches would be on the same data.
+LEARNING = ("sas",)
 PACE = 3  # the pace: the search's rate over the last PACE stints' worth of time
 # SAS's inner loop stall and surrogate share where the spec has none (the paper's specs): the defaults
 STALL = SurrogateSettings.model_fields["inner_stall"].default
@@ -190,8 +197,9 @@ class Auto:
     # --- the choice ---------------------------------------------------------------------------
 
     def score(self, arm: str) -> float:
-        """``arm``'s gain in its last :data:`WINDOW` stints over what the search's pace would have
-        gained in their seconds: what decides. The pace of a stint is that before it, or, once
+        """``arm``'s gain in its last :data:`WINDOW` stints (one for an arm that learns,
+        :data:`LEARNING`) over what the search's pace would have gained in their seconds: what
+        decides. The pace of a stint is that before it, or, once
         the search has gone on for as long, the geometric mean of the paces before and after it:
         rates fall fast early on, and a stint compared with the pace before it alone would look
         worse the longer it lasted. The run's first stint has no pace before it: it scores 1 while
@@ -199,7 +207,7 @@ class Auto:
         expected gain made Random's score 4 to 6 after a one-second re-measurement)."""
         stints = self._stints(arm)
         gain = expected = 0.0
-        for stint in [s for s in stints if s[0].stint > 0][-WINDOW:] or stints[:1]:
+        for stint in [s for s in stints if s[0].stint > 0][-_window(arm) :] or stints[:1]:
             before = stint[0].pace
             after = self._pace(stint[-1].batch, before=False)
             pace = math.sqrt(before * after) if after is not None and before > 0 and after > 0 else before
@@ -208,8 +216,8 @@ class Auto:
         return _ratio(gain, expected)
 
     def rate(self, arm: str) -> float:
-        """QD-score gained per second by ``arm`` in its last :data:`WINDOW` stints."""
-        recent = [b for stint in self._stints(arm)[-WINDOW:] for b in stint]
+        """QD-score gained per second by ``arm`` in the stints that score it."""
+        recent = [b for stint in self._stints(arm)[-_window(arm) :] for b in stint]
         return sum(b.gain for b in recent) / max(sum(b.seconds for b in recent), 1e-9)
 
     def quantum(self) -> float:
@@ -220,10 +228,11 @@ class Auto:
     def _continues(self, search: SearchView) -> bool:
         """Whether the current stint goes on: it has lasted less than a quantum, or is a first
         measurement of fewer than :data:`WARMUP` batches of an arm that adapts (CMA-ES over its
-        generations, SAS's surrogate over its rounds). Random's and MAP-Elites' batches depend on
-        the archive only, so their first one is like the next: where a batch takes half a
-        minute, warming them up took Random's first stint 40 % of a 5-minute run, and left
-        MAP-Elites unmeasured (collaboration on a slow machine)."""
+        generations). Random's and MAP-Elites' batches depend on the archive only, and SAS's on
+        the data, so their first one is like the next: where a batch takes half a minute,
+        warming them up took Random's first stint 40 % of a 5-minute run, and left MAP-Elites
+        unmeasured (collaboration on a slow machine); three SAS batches measured at 10 s took
+        42 s of collaboration's 72 s of exploring."""
         if self.stint_batches == 0 or not self._fits(search, self.choice):
             return False
         warming = self.reason == "first measurement" and self.choice in ADAPTING and self.stint_batches < WARMUP
@@ -311,7 +320,7 @@ class Auto:
         """What a stint of ``arm`` should take: a quantum, or one of its batches if longer (as long
         as its last one). A first one: one batch of its size at the recent seconds per evaluation
         (for SAS, of its largest size yet, and its surrogate's share of the time besides),
-        :data:`WARMUP` for an arm that adapts."""
+        :data:`WARMUP` of them for an arm that adapts."""
         if done := self._batches(arm):
             return max(self.quantum(), done[-1].seconds)
         if arm == "sas":
@@ -406,6 +415,11 @@ def _by_stint(batches: list[Batch]) -> dict[int, list[Batch]]:
     for b in batches:
         stints.setdefault(b.stint, []).append(b)
     return stints
+
+
+def _window(arm: str) -> int:
+    """How many of ``arm``'s latest stints score it."""
+    return 1 if arm in LEARNING else WINDOW
 
 
 def _ratio(gain: float, expected: float) -> float:

@@ -46,8 +46,8 @@ def test_auto_measures_each_arm_then_spends_each_stint_on_the_best_rate(toy_spec
     log = json.loads((run / "auto.json").read_text())
     batches = log["batches"]
     stints = [[b for b in batches if b["stint"] == s] for s in range(batches[-1]["stint"] + 1)]
-    # Each arm measured once, an arm that adapts over at least WARMUP batches (SAS once it has
-    # data to train on).
+    # Each arm measured once (SAS once it has data to train on), an arm that adapts over at
+    # least WARMUP batches.
     firsts = [s for s in stints if s[0]["reason"] == "first measurement"]
     assert sorted(s[0]["arm"] for s in firsts) == sorted(ARMS) and firsts[0][0]["arm"] == "random"
     assert all(len(s) >= auto.WARMUP for s in firsts if s[0]["arm"] in auto.ADAPTING)
@@ -161,16 +161,17 @@ def test_the_runs_first_stint_scores_only_until_its_arm_has_another(toy_spec):
 def test_only_an_arm_that_adapts_is_warmed_up_over_several_batches(toy_spec):
     # Where a Random batch takes 40 s (collaboration on a slow machine), three of them were 40 %
     # of a 5-minute run, and MAP-Elites' three-batch first measurement did not fit the share of
-    # it that exploring may take. Their batches depend on the archive only; CMA-ES adapts.
+    # it that exploring may take. Their batches depend on the archive only, SAS's on the data;
+    # CMA-ES adapts.
     proposer = auto.Auto(load_domain(toy_spec()), seed=0, options=qd.SurrogateOptions())
     proposer.history = [
         auto.Batch(batch=1, stint=0, arm="random", reason="", evaluations=100, seconds=40.0, gain=1.0, rates={})
     ]
     proposer.spent, proposer.stint_batches, proposer.stint_seconds = 40.0, 1, 40.0
     search = SimpleNamespace(seconds_left=math.inf)
-    for arm in ARMS[:-1]:
+    for arm in ARMS:
         proposer.choice, proposer.reason = arm, "first measurement"
-        assert proposer._continues(search) == (arm in auto.ADAPTING)
+        assert proposer._continues(search) == (arm == "cma_mae")
     batch = {arm: proposer.arms[arm].batch_size for arm in ARMS[:-1]}
     assert proposer._expected_seconds("map_elites") == pytest.approx(batch["map_elites"] * 0.4)
     assert proposer._expected_seconds("cma_mae") == pytest.approx(auto.WARMUP * batch["cma_mae"] * 0.4)
@@ -197,11 +198,11 @@ def test_sas_in_auto_keeps_the_surrogate_to_its_time_share_of_what_simulating_a_
     ]
     proposer.spent = 4.0
     assert proposer.arms["sas"]._seconds(proposer._seconds_per_evaluation()) == pytest.approx(4.0 * share / (1 - share))
-    assert proposer._expected_seconds("sas") == pytest.approx(auto.WARMUP * 4.0 / (1 - share))
+    assert proposer._expected_seconds("sas") == pytest.approx(4.0 / (1 - share))
 
 
 def test_arms_never_measured_are_measured_the_cheapest_first_stint_first(toy_spec, monkeypatch):
-    # CMA-MAE's first stint is three of its batches of 8 x 37; SAS's three of 100 and the
+    # CMA-MAE's first stint is three of its batches of 8 x 37; SAS's one of 100 and the
     # surrogate's share: SAS comes first, once there are data to train it on.
     monkeypatch.setattr(auto, "EXPLORE", 1.0)
     spec = toy_spec()
@@ -215,6 +216,28 @@ def test_arms_never_measured_are_measured_the_cheapest_first_stint_first(toy_spe
     assert proposer._expected_seconds("sas") < proposer._expected_seconds("cma_mae")
     assert proposer._choose(SimpleNamespace(seconds_left=math.inf, evaluated=200)) == ("sas", "first measurement")
     assert proposer._choose(SimpleNamespace(seconds_left=math.inf, evaluated=99)) == ("cma_mae", "first measurement")
+
+
+def test_sas_is_scored_by_its_latest_stint_as_its_surrogate_learns_from_every_evaluation(toy_spec):
+    # On collaboration SAS's first stint, on 120 evaluations, gained 0.37 of the pace and a later
+    # one 1.02; scored over both, SAS stayed below MAP-Elites for the rest of the run.
+    proposer = auto.Auto(load_domain(toy_spec()), seed=0, options=qd.SurrogateOptions())
+
+    def stint(number: int, arm: str, gain: float) -> auto.Batch:
+        return auto.Batch(
+            batch=number + 1, stint=number, arm=arm, reason="", evaluations=10, seconds=1.0, gain=gain, pace=100.0,
+            rates={},
+        )  # fmt: skip
+
+    proposer.history = [
+        stint(0, "random", 100.0),
+        *(stint(n, arm, gain) for n, (arm, gain) in enumerate([("sas", 30.0), ("map_elites", 30.0)], start=1)),
+        *(stint(n, arm, 100.0) for n, arm in enumerate(["random"] * 3 + ["sas", "map_elites"], start=3)),
+    ]
+    # Every later stint kept the pace: SAS scores its latest alone, MAP-Elites its last two.
+    assert proposer.score("sas") == pytest.approx(1.0)
+    assert proposer.score("map_elites") == pytest.approx(130.0 / 200.0)
+    assert proposer.rate("sas") == pytest.approx(100.0)
 
 
 def test_a_measurement_that_made_its_arm_the_best_is_not_counted_as_exploring(toy_spec):
