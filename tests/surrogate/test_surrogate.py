@@ -297,9 +297,17 @@ def test_incremental_training_sees_the_new_samples_and_as_many_old_ones(tmp_path
     # Later rounds: the samples new since the last round, and as many old ones (at least a batch,
     # and at most every old one: how many the last round had depends on the batches' sizes, which
     # follow the surrogate's archive, so this does not fix it).
-    trained, batch = proposer.trained, proposer.surrogate.batch_size
+    trained, batch, largest = proposer.trained, proposer.surrogate.batch_size, proposer.largest
     assert trained >= 30
-    for new in (10, 2 * trained):
+    for new in (10, largest):
         rows = proposer._rows(trained + new)
         assert len(rows) == new + min(trained, max(new, batch)) and len(set(rows.tolist())) == len(rows)
         assert set(range(trained, trained + new)) <= set(rows.tolist())
+    # More new samples than its largest batch (others simulated them: auto's model-free arms):
+    # as many as that batch, drawn from all of them; the rest are old for later rounds to replay.
+    rows = proposer._rows(trained + 10 * largest)
+    drawn = rows[rows >= trained]
+    assert len(drawn) == largest and len(rows) == largest + min(trained, max(largest, batch))
+    assert len(set(rows.tolist())) == len(rows) and drawn.max() >= trained + 5 * largest
+    proposer.trained = 0
+    assert proposer._rows(largest) is None and len(proposer._rows(3 * largest)) == largest
