@@ -389,9 +389,10 @@ class SurrogateSettings(Strict):
     learning_rate: PositiveFloat = 1e-4
     training: Literal["paper", "incremental"] = Field(
         "incremental",
-        description="incremental: the warm networks train on the new evaluations and as many replayed old ones "
-        "(a flat cost per outer iteration); paper: each outer iteration trains `epochs` passes over every "
-        "evaluation so far (its cost grows with the run: the bundled specs of the paper's experiments set it)",
+        description="incremental: the warm networks train on the new evaluations (at most a batch's worth, drawn "
+        "at random; the others are replayed later) and as many replayed old ones (a flat cost per outer "
+        "iteration); paper: each outer iteration trains `epochs` passes over every evaluation so far (its "
+        "cost grows with the run: the bundled specs of the paper's experiments set it)",
     )
     inner_stall: PositiveInt | None = Field(
         50,
