@@ -250,7 +250,7 @@ class SurrogateAssisted:
         count as old, for later rounds to replay. Only others add more between two rounds (auto's
         other arms, thousands of scenarios in a stint): trained on all of them in the same
         seconds, the networks saw each a fraction of an epoch, and SAS's proposals in auto were
-        chosen by a surrogate whose losses were 10 to 30 times those of SAS alone (collaboration)."""
+        chosen by a surrogate whose predictor's loss was over ten times SAS alone's (collaboration)."""
         if self.training == "paper" or (self.trained == 0 and samples <= self.largest):
             return None
         rng = np.random.default_rng([self.seed, self.outer])
