@@ -24,9 +24,7 @@ workers).
   arm again once the others have had :data:`PATIENCE` times its last stint (a patience that
   doubles each time it loses again); both only while measuring arms that did not come out of it
   the best has taken at most :data:`EXPLORE` of the run. With a time limit, that share is of the
-  limit, from the start: the sooner the best arm is known, the longer it runs. An arm that learns
-  and loses is measured again each time its data have doubled, out of a share of its own
-  (:data:`RELEARN` of the run so far): what it did on little data says little of what it does now.
+  limit, from the start: the sooner the best arm is known, the longer it runs.
 
 All arms share what is simulated: SAS trains on every evaluation, and the model-free arms share one
 archive, which receives SAS's evaluations too. SAS runs here with the schedule whose cost follows
@@ -58,7 +56,6 @@ ARMS = ("random", "map_elites", "cma_mae", "sas")
 PATIENCE = 4.0  # a losing arm waits this many times its last stint's seconds, doubled per loss
 MAX_PATIENCE = 256.0
 EXPLORE = 0.08  # at most this share of the run measures arms that do not come out best
-RELEARN = 0.06  # and this share of it so far re-measures a losing learning arm, each time its data double
 MIN_STINT = 1.0  # seconds: a stint lasts at least this long (and one batch of its arm)
 STINT_SHARE = 0.03  # and this share of the run so far
 WARMUP = 3  # the first stint of an arm that adapts lasts at least this many of its batches
@@ -70,7 +67,6 @@ WINDOW = 2  # an arm's score: its gain over the pace's, in its last WINDOW stint
 # SAS's score under MAP-Elites' for the 8 minutes after a stint at 1.02). For the same reason it
 # needs no warm-up: its first batch is what any of its batches would be on the same data.
 LEARNING = ("sas",)
-DOUBLED = "re-measure on doubled data"  # the reason of a learning arm's re-measurement that RELEARN bounds
 PACE = 3  # the pace: the search's rate over the last PACE stints' worth of time
 # SAS's inner loop stall and surrogate share where the spec has none (the paper's specs): the defaults
 STALL = SurrogateSettings.model_fields["inner_stall"].default
@@ -256,7 +252,7 @@ class Auto:
     def _choose(self, search: SearchView) -> tuple[str, str]:
         if not self.history:
             return ARMS[0], "first measurement"
-        spent, explored, relearned = self.spent, self._explored(), self._explored(relearning=True)
+        spent, explored = self.spent, self._explored()
         # With a time limit, exploring may take its share of the whole run from the start: the
         # sooner the best arm is known, the longer it runs.
         horizon = spent + (search.seconds_left if math.isfinite(search.seconds_left) else 0.0)
@@ -274,32 +270,16 @@ class Auto:
             for arm in sorted(measured, key=self._since, reverse=True)
             if arm != best and self._since(arm) >= self.patience[arm] * self._last_stint_seconds(arm)
         ]
-        # A learning arm that loses is measured again each time the data it learns from have
-        # doubled, out of a share of its own: where its measurements on little data lost (at 0.4
-        # of the pace on collaboration's first 120 evaluations), the exploring share went on them,
-        # and SAS was not measured again in the 13 minutes left (SAS alone reached 1.24 of
-        # MAP-Elites in 15 minutes of collaboration).
-        doubled = [
-            (arm, f"{DOUBLED} (best: {best})")
-            for arm in LEARNING
-            if arm in measured and arm != best and self._evaluated() >= 2 * self._evaluated(self._last_stint_start(arm))
-        ]
-        # Measured in that order, the first that its share allows: re-measuring on doubled data
-        # takes its share of the run so far, not of the limit, so that it waits for the data.
-        for arm, reason in [(arm, "first measurement") for arm in unmeasured] + doubled + stale:
+        # Measured in that order, the first that the exploring share allows.
+        for arm, reason in [(arm, "first measurement") for arm in unmeasured] + stale:
             cost = self._expected_seconds(arm)
-            if reason.startswith(DOUBLED):
-                allowed = relearned + cost <= RELEARN * (spent + cost)
-            else:
-                allowed = explored + cost <= EXPLORE * max(horizon, spent + cost)
-            if allowed and self._fits(search, arm):
+            if explored + cost <= EXPLORE * max(horizon, spent + cost) and self._fits(search, arm):
                 return arm, reason
         return best, "best rate"
 
-    def _explored(self, *, relearning: bool = False) -> float:
+    def _explored(self) -> float:
         """Seconds spent measuring arms that did not come out of it the best: what :data:`EXPLORE`
-        bounds (or, ``relearning``, re-measuring learning arms on doubled data: what
-        :data:`RELEARN` bounds). A measurement that made its arm the best was no detour, and counting it spent the
+        bounds. A measurement that made its arm the best was no detour, and counting it spent the
         share on the winner: on collaboration, Random won a one-stint re-measurement on noise at
         3 minutes, MAP-Elites' next re-measurement no longer fitted, and Random, judged from then
         on against its own pace, ran the last 2 minutes alone (0.93 of MAP-Elites). Whether a
@@ -308,8 +288,8 @@ class Auto:
         now = {arm: self.score(arm) for arm in ARMS if self._batches(arm)}
         seconds = 0.0
         for number, stint in stints.items():
-            arm, reason = stint[0].arm, stint[0].reason
-            if number == 0 or reason == "best rate" or reason.startswith(DOUBLED) != relearning:
+            arm = stint[0].arm
+            if number == 0 or stint[0].reason == "best rate":
                 continue
             after = stints[number + 1][0].rates if number + 1 in stints else now
             if after.get(arm, -math.inf) < max(after.values()):
@@ -376,14 +356,6 @@ class Auto:
         restarted CMA-ES needs generations to adapt again, and restarting CMA-MAE after every
         second-long stint of another arm cost it its lead for 43 s of a 2-minute teleoperation run."""
         return self._since(arm) >= PATIENCE * self._last_stint_seconds(arm)
-
-    def _evaluated(self, batches: int | None = None) -> int:
-        """Evaluations in the first ``batches`` batches (all of them by default)."""
-        return sum(b.evaluations for b in self.history[:batches])
-
-    def _last_stint_start(self, arm: str) -> int:
-        """How many batches came before ``arm``'s last stint."""
-        return self._stints(arm)[-1][0].batch - 1
 
     def _last_stint_seconds(self, arm: str) -> float:
         last = self._batches(arm)[-1].stint

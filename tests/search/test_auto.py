@@ -6,7 +6,6 @@ import csv
 import itertools
 import json
 import math
-from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -267,39 +266,3 @@ def test_a_measurement_that_made_its_arm_the_best_is_not_counted_as_exploring(to
     proposer.history = proposer.history[:-1]
     won = proposer.score("random") >= proposer.score("map_elites")
     assert proposer._explored() == (2.0 if won else 4.0)
-
-
-def test_a_losing_sas_is_measured_again_each_time_its_data_double_out_of_a_share_of_its_own(toy_spec, monkeypatch):
-    # On collaboration SAS lost its measurements on 120 and ~1,000 evaluations, the exploring
-    # share went on them, and SAS did not run again in the 13 minutes left.
-    monkeypatch.setattr(auto, "EXPLORE", 0.0)
-    proposer = auto.Auto(load_domain(toy_spec()), seed=0, options=qd.SurrogateOptions())
-    search = SimpleNamespace(seconds_left=math.inf, evaluated=0)
-
-    def add(arm: str, reason: str, evaluations: int, seconds: float, gain: float) -> None:
-        proposer.history.append(
-            auto.Batch(
-                batch=len(proposer.history) + 1, stint=len(proposer.history), arm=arm, reason=reason,
-                evaluations=evaluations, seconds=seconds, gain=gain, pace=100.0,
-                rates={a: proposer.score(a) for a in ARMS if proposer._batches(a)},
-            )
-        )  # fmt: skip
-        proposer.spent += seconds
-
-    add("random", "first measurement", 150, 1.0, 100.0)
-    add("sas", "first measurement", 100, 2.0, 20.0)  # began on 150 evaluations, at a tenth of the pace
-    add("map_elites", "first measurement", 20, 20.0, 3000.0)
-    assert proposer._choose(search) == ("map_elites", "best rate")  # 270 evaluations: not doubled yet
-    add("map_elites", "best rate", 30, 20.0, 3000.0)
-    doubled = ("sas", f"{auto.DOUBLED} (best: map_elites)")
-    assert proposer._choose(search) == doubled  # 300: doubled, and a second is within 6 % of 43
-    add(*doubled, 100, 1.0, 10.0)  # lost again: its own share, not exploring's, paid for it
-    assert (proposer._explored(), proposer._explored(relearning=True)) == (2.0, 1.0)
-    add("map_elites", "best rate", 150, 20.0, 3000.0)
-    assert proposer._choose(search) == ("map_elites", "best rate")  # 550 < 2 x 300
-    add("map_elites", "best rate", 50, 20.0, 3000.0)
-    assert proposer._choose(search) == doubled
-    # A re-measurement that the share of the run so far cannot pay for waits.
-    proposer.history[-3] = replace(proposer.history[-3], seconds=10.0)
-    proposer.spent += 9.0
-    assert proposer._choose(search) == ("map_elites", "best rate")
