@@ -406,7 +406,7 @@ class SurrogateSettings(Strict):
         "for it; for machines with cores or a GPU beyond the workers",
     )
     time_share: float = Field(
-        0.33,
+        0.2,
         gt=0,
         le=1,
         description="the most of the run's time the surrogate's training and inner loop may take: each outer "

@@ -180,9 +180,9 @@ def test_only_an_arm_that_adapts_is_warmed_up_over_several_batches(toy_spec):
 @pytest.mark.parametrize(
     ("setting", "option", "share"),
     [
-        ("", None, auto.SHARE),
-        ("  surrogate: {time_share: 0.2}\n", None, 0.2),
-        ("  surrogate: {time_share: 0.2}\n", 0.5, 0.5),
+        ("", None, 0.2),  # the specs' default
+        ("  surrogate: {time_share: 0.25}\n", None, 0.25),
+        ("  surrogate: {time_share: 0.25}\n", 0.5, 0.5),
         ("  surrogate: {time_share: 1}\n", None, auto.SHARE),  # the paper's specs never cut; auto does
     ],
 )
