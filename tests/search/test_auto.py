@@ -58,17 +58,24 @@ def test_auto_measures_each_arm_then_spends_each_stint_on_the_best_rate(toy_spec
         if first["reason"] == "best rate":
             assert rates[first["arm"]] == max(rates.values())
         elif first["reason"] != "first measurement":  # a losing arm, measured again
-            assert first["reason"].startswith("re-measure") and rates[first["arm"]] < max(rates.values())
+            learning = first["arm"] in auto.LEARNING and first["reason"].startswith("keeps learning")
+            assert first["reason"].startswith("re-measure") or learning
+            assert rates[first["arm"]] < max(rates.values())
     # A stint lasts at least its quantum, and measuring arms that did not come out best took at
-    # most the allowed share of the run (give or take the stint that crossed it).
+    # most the allowed share of the run (give or take the stint that crossed it), as did
+    # measuring a learning arm again.
     assert all(sum(b["seconds"] for b in stint) >= 0.2 for stint in stints[:-1])
-    explored = [
-        sum(b["seconds"] for b in s)
-        for s, after in itertools.pairwise(stints[1:])
-        if s[0]["reason"] != "best rate" and after[0]["rates"][s[0]["arm"]] < max(after[0]["rates"].values())
-    ]
     spent = sum(b["seconds"] for b in batches)
-    assert explored and sum(explored) <= 0.6 * spent + max(explored)
+    for learning in (False, True):
+        explored = [
+            sum(b["seconds"] for b in s)
+            for s, after in itertools.pairwise(stints[1:])
+            if s[0]["reason"] != "best rate"
+            and s[0]["reason"].startswith("keeps learning") == learning
+            and after[0]["rates"][s[0]["arm"]] < max(after[0]["rates"].values())
+        ]
+        assert sum(explored) <= 0.6 * spent + max(explored, default=0.0)
+        assert explored or learning
     assert sum(b["evaluations"] for b in batches) == found.state.evaluations == 4000
 
     # Where the time went is in run.json and progress.csv too.
@@ -266,3 +273,59 @@ def test_a_measurement_that_made_its_arm_the_best_is_not_counted_as_exploring(to
     proposer.history = proposer.history[:-1]
     won = proposer.score("random") >= proposer.score("map_elites")
     assert proposer._explored() == (2.0 if won else 4.0)
+
+
+def test_a_learning_arm_not_far_behind_is_measured_again_from_a_share_of_its_own(toy_spec, monkeypatch):
+    # On collaboration SAS gains half the pace in its first minutes and passes MAP-Elites after
+    # five: a losing SAS is measured again as it learns, while it is not far behind, however much
+    # of the exploring share the other arms took.
+    proposer = auto.Auto(load_domain(toy_spec()), seed=0, options=qd.SurrogateOptions())
+
+    def stint(number: int, arm: str, reason: str, seconds: float, gain: float, rates: dict) -> auto.Batch:
+        return auto.Batch(
+            batch=number + 1, stint=number, arm=arm, reason=reason, evaluations=10, seconds=seconds, gain=gain,
+            pace=100.0 if number else 0.0, rates=rates,
+        )  # fmt: skip
+
+    def history(sas_gain: float) -> list[auto.Batch]:
+        scores = {"random": 1.0, "cma_mae": 0.8, "sas": 0.5, "map_elites": 1.2}  # each at the next's start
+        return [
+            stint(0, "random", "first measurement", 10.0, 1000.0, {}),
+            stint(1, "cma_mae", "first measurement", 10.0, 800.0, dict(list(scores.items())[:1])),
+            stint(2, "sas", "first measurement", 5.0, sas_gain, dict(list(scores.items())[:2])),
+            stint(3, "map_elites", "first measurement", 10.0, 1200.0, dict(list(scores.items())[:3])),
+            stint(4, "map_elites", "best rate", 10.0, 1200.0, scores),
+        ]
+
+    forever = SimpleNamespace(seconds_left=math.inf, evaluated=1000)
+    proposer.spent = 1000.0  # a long run: stints of 30 s, and the pace after a stint not yet known
+    # SAS at 0.5 of the pace, MAP-Elites best at 1.2: the others have had 4 times SAS's stint.
+    proposer.history = history(250.0)
+    assert proposer.score("sas") == pytest.approx(0.5) and proposer.score("map_elites") == pytest.approx(1.2)
+    # While its share of the time cuts every inner loop short of its stall, more data cannot
+    # lift it (teleoperation): a losing arm like any other.
+    sas = proposer.arms["sas"]
+    sas.fits = [{"inner_iterations": sas.stall - 1}] * 3
+    assert proposer._choose(forever) == ("sas", "re-measure (best: map_elites)")
+    sas.fits[1] = {"inner_iterations": sas.stall}
+    assert proposer._choose(forever) == ("sas", "keeps learning (best: map_elites)")
+    # Its first round pays for the warm-up: it counts for nothing, either way.
+    sas.fits = [{"inner_iterations": sas.stall}, {"inner_iterations": sas.stall - 1}]
+    assert proposer._choose(forever) == ("sas", "re-measure (best: map_elites)")
+    sas.fits = [{"inner_iterations": 1}]
+    assert proposer._choose(forever) == ("sas", "keeps learning (best: map_elites)")
+    # Far behind (under FLOOR of the best), it is a losing arm like any other, from the exploring share.
+    proposer.history = history(100.0)
+    assert proposer._choose(forever) == ("sas", "re-measure (best: map_elites)")
+    # Once exploring took its share, only the learning arm is measured again, while it is not far behind.
+    monkeypatch.setattr(auto, "EXPLORE", 0.04)
+    assert proposer._choose(forever) == ("map_elites", "best rate")
+    proposer.history = history(250.0)
+    assert proposer._choose(forever) == ("sas", "keeps learning (best: map_elites)")
+    # A learning stint that did not come out best counts in its own share, not the exploring one.
+    rates = {"random": 1.0, "cma_mae": 0.8, "sas": 0.4, "map_elites": 1.2}
+    proposer.history += [
+        stint(5, "sas", "keeps learning (best: map_elites)", 5.0, 200.0, rates),
+        stint(6, "map_elites", "best rate", 10.0, 1200.0, rates),
+    ]
+    assert proposer._explored(learning=True) == 5.0 and proposer._explored() == 15.0
