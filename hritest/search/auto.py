@@ -17,8 +17,9 @@ workers).
   little about now: a stint's gain is compared with what the search's *pace* around it (its rate
   over the :data:`PACE` quanta of time before the stint and, once the search has gone on as long,
   after it) would have gained in the same seconds, and an arm's score is that ratio over its last
-  :data:`WINDOW` stints; SAS's over its latest alone, since its surrogate learns from every
-  evaluation and an older stint understates what it does now.
+  :data:`WINDOW` stints; SAS's over those it began on at least :data:`FRESH` of the data its
+  latest began on, since its surrogate learns from every evaluation and a stint on far less data
+  understates what it does now.
 * **Exploring costs a bounded share.** Each stint goes to the arm with the best score, except
   that arms never measured are measured first, one at a time and the cheapest first, and a losing
   arm again once the others have had :data:`PATIENCE` times its last stint (a patience that
@@ -69,12 +70,15 @@ STINT_SHARE = 0.03  # and this share of the run so far
 WARMUP = 3  # the first stint of an arm that adapts lasts at least this many of its batches
 ADAPTING = ("cma_mae",)  # its batches depend on its own earlier ones (CMA-ES's step size and covariance)
 WINDOW = 2  # an arm's score: its gain over the pace's, in its last WINDOW stints
-# Scored by its latest stint alone: the surrogate learns from every evaluation, the other arms'
-# too, so each stint of SAS starts from more data than the last and an older one understates it
+# Scored by its stints begun on at least FRESH of the data its latest began on: the surrogate
+# learns from every evaluation, the other arms' too, so a stint on far less data understates it
 # (on collaboration, a first measurement at 10 s, on 120 evaluations, at 0.37 of the pace kept
-# SAS's score under MAP-Elites' for the 8 minutes after a stint at 1.02). For the same reason it
-# needs no warm-up: its first batch is what any of its batches would be on the same data.
+# SAS's score under MAP-Elites' for the 8 minutes after a stint at 1.02). Not by its latest alone:
+# its stints are single batches whose gains range from 0.35 to 1.9 of the pace, and one bad batch
+# handed the lead back for minutes. For the same reason it needs no warm-up: its first batch is
+# what any of its batches would be on the same data.
 LEARNING = ("sas",)
+FRESH = 0.5
 PACE = 3  # the pace: the search's rate over the last PACE stints' worth of time
 # SAS's inner loop stall where the spec has none (the paper's specs): the default
 STALL = SurrogateSettings.model_fields["inner_stall"].default
@@ -207,17 +211,13 @@ class Auto:
     # --- the choice ---------------------------------------------------------------------------
 
     def score(self, arm: str) -> float:
-        """``arm``'s gain in its last :data:`WINDOW` stints (one for an arm that learns,
-        :data:`LEARNING`) over what the search's pace would have gained in their seconds: what
-        decides. The pace of a stint is that before it, or, once
-        the search has gone on for as long, the geometric mean of the paces before and after it:
-        rates fall fast early on, and a stint compared with the pace before it alone would look
-        worse the longer it lasted. The run's first stint has no pace before it: it scores 1 while
-        its arm has no other, and no longer counts once it has (counted, its gain against no
-        expected gain made Random's score 4 to 6 after a one-second re-measurement)."""
-        stints = self._stints(arm)
+        """``arm``'s gain in the stints that score it (:meth:`_scoring`) over what the search's
+        pace would have gained in their seconds: what decides. The pace of a stint is that before
+        it, or, once the search has gone on for as long, the geometric mean of the paces before
+        and after it: rates fall fast early on, and a stint compared with the pace before it alone
+        would look worse the longer it lasted."""
         gain = expected = 0.0
-        for stint in [s for s in stints if s[0].stint > 0][-_window(arm) :] or stints[:1]:
+        for stint in self._scoring(arm):
             before = stint[0].pace
             after = self._pace(stint[-1].batch, before=False)
             pace = math.sqrt(before * after) if after is not None and before > 0 and after > 0 else before
@@ -227,8 +227,21 @@ class Auto:
 
     def rate(self, arm: str) -> float:
         """QD-score gained per second by ``arm`` in the stints that score it."""
-        recent = [b for stint in self._stints(arm)[-_window(arm) :] for b in stint]
+        recent = [b for stint in self._scoring(arm) for b in stint]
         return sum(b.gain for b in recent) / max(sum(b.seconds for b in recent), 1e-9)
+
+    def _scoring(self, arm: str) -> list[list[Batch]]:
+        """The stints that score ``arm``: its last :data:`WINDOW`, or for an arm that learns
+        (:data:`LEARNING`) those begun on at least :data:`FRESH` of the evaluations its latest
+        began on. The run's first stint only while its arm has no other (it has no pace before it:
+        counted, its gain against no expected gain made Random's score 4 to 6 after a one-second
+        re-measurement)."""
+        stints = [s for s in self._stints(arm) if s[0].stint > 0] or self._stints(arm)[:1]
+        if arm not in LEARNING:
+            return stints[-WINDOW:]
+        done = np.cumsum([0] + [b.evaluations for b in self.history])  # evaluated before each batch
+        began = [done[s[0].batch - 1] for s in stints]
+        return [s for s, data in zip(stints, began, strict=True) if data >= FRESH * began[-1]]
 
     def quantum(self) -> float:
         """How long a stint lasts at least: :data:`MIN_STINT`, and :data:`STINT_SHARE` of the run
@@ -456,11 +469,6 @@ def _by_stint(batches: list[Batch]) -> dict[int, list[Batch]]:
     for b in batches:
         stints.setdefault(b.stint, []).append(b)
     return stints
-
-
-def _window(arm: str) -> int:
-    """How many of ``arm``'s latest stints score it."""
-    return 1 if arm in LEARNING else WINDOW
 
 
 def _ratio(gain: float, expected: float) -> float:

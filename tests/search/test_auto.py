@@ -225,9 +225,10 @@ def test_arms_never_measured_are_measured_the_cheapest_first_stint_first(toy_spe
     assert proposer._choose(SimpleNamespace(seconds_left=math.inf, evaluated=99)) == ("cma_mae", "first measurement")
 
 
-def test_sas_is_scored_by_its_latest_stint_as_its_surrogate_learns_from_every_evaluation(toy_spec):
+def test_sas_is_scored_by_its_stints_on_comparable_data_as_its_surrogate_learns_from_every_evaluation(toy_spec):
     # On collaboration SAS's first stint, on 120 evaluations, gained 0.37 of the pace and a later
-    # one 1.02; scored over both, SAS stayed below MAP-Elites for the rest of the run.
+    # one 1.02; scored over both, SAS stayed below MAP-Elites for the rest of the run. Scored by
+    # its latest alone, one bad batch among good ones handed the lead back for minutes.
     proposer = auto.Auto(load_domain(toy_spec()), seed=0, options=qd.SurrogateOptions())
 
     def stint(number: int, arm: str, gain: float) -> auto.Batch:
@@ -241,10 +242,15 @@ def test_sas_is_scored_by_its_latest_stint_as_its_surrogate_learns_from_every_ev
         *(stint(n, arm, gain) for n, (arm, gain) in enumerate([("sas", 30.0), ("map_elites", 30.0)], start=1)),
         *(stint(n, arm, 100.0) for n, arm in enumerate(["random"] * 3 + ["sas", "map_elites"], start=3)),
     ]
-    # Every later stint kept the pace: SAS scores its latest alone, MAP-Elites its last two.
+    # Every later stint kept the pace: SAS's first (begun on 10 evaluations, under half the 60 its
+    # latest began on) no longer scores it, MAP-Elites scores its last two.
     assert proposer.score("sas") == pytest.approx(1.0)
     assert proposer.score("map_elites") == pytest.approx(130.0 / 200.0)
     assert proposer.rate("sas") == pytest.approx(100.0)
+    # A bad batch on comparable data (begun on 80) counts beside the good one, not alone.
+    proposer.history.append(stint(8, "sas", 40.0))
+    assert proposer.score("sas") == pytest.approx(140.0 / 200.0)
+    assert proposer.rate("sas") == pytest.approx(70.0)
 
 
 def test_a_measurement_that_made_its_arm_the_best_is_not_counted_as_exploring(toy_spec):
