@@ -78,7 +78,7 @@ WINDOW = 2  # an arm's score: its gain over the pace's, in its last WINDOW stint
 # handed the lead back for minutes. For the same reason it needs no warm-up: its first batch is
 # what any of its batches would be on the same data.
 LEARNING = ("sas",)
-FRESH = 0.5
+FRESH = 0.5  # SAS is scored by its stints begun on at least this share of the data its latest began on
 PACE = 3  # the pace: the search's rate over the last PACE stints' worth of time
 # SAS's inner loop stall where the spec has none (the paper's specs): the default
 STALL = SurrogateSettings.model_fields["inner_stall"].default
