@@ -6,6 +6,7 @@ import csv
 import itertools
 import json
 import math
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -223,6 +224,38 @@ def test_arms_never_measured_are_measured_the_cheapest_first_stint_first(toy_spe
     assert proposer._expected_seconds("sas") < proposer._expected_seconds("cma_mae")
     assert proposer._choose(SimpleNamespace(seconds_left=math.inf, evaluated=200)) == ("sas", "first measurement")
     assert proposer._choose(SimpleNamespace(seconds_left=math.inf, evaluated=99)) == ("cma_mae", "first measurement")
+
+
+def test_the_seconds_before_the_limit_that_a_sas_batch_would_not_fit_go_to_the_best_model_free_arm(
+    toy_spec, monkeypatch
+):
+    # SAS's batch cannot be cut, and one that the limit cuts was simulated for nothing: a
+    # 5-minute collaboration run ended at 294 s, its last 6 s spent on an inner loop.
+    monkeypatch.setattr(auto, "EXPLORE", 0.0)  # nothing measured but the best
+    proposer = auto.Auto(load_domain(toy_spec()), seed=0, options=qd.SurrogateOptions())
+
+    def stint(number: int, arm: str, seconds: float, gain: float) -> auto.Batch:
+        return auto.Batch(
+            batch=number + 1, stint=number, arm=arm, reason="", evaluations=10, seconds=seconds, gain=gain,
+            pace=100.0 if number else 0.0, rates={"random": 0.8, "map_elites": 0.9, "sas": 2.0},
+        )  # fmt: skip
+
+    proposer.history = [
+        stint(0, "random", 10.0, 1000.0),
+        stint(1, "random", 10.0, 800.0),
+        stint(2, "map_elites", 10.0, 900.0),
+        stint(3, "sas", 15.0, 3000.0),
+    ]
+    proposer.spent = 1000.0  # a long run: the pace after a stint not yet known
+    assert [proposer.score(arm) for arm in ("random", "map_elites", "sas")] == pytest.approx([0.8, 0.9, 2.0])
+    assert proposer._choose(SimpleNamespace(seconds_left=15.0, evaluated=400)) == ("sas", "best rate")
+    assert proposer._choose(SimpleNamespace(seconds_left=14.0, evaluated=400)) == (
+        "map_elites", "best rate in the time left"
+    )  # fmt: skip
+    # Such a stint is the best arm's that fits: not a measurement, not counted as exploring.
+    explored = proposer._explored()
+    proposer.history.append(replace(stint(4, "map_elites", 14.0, 700.0), reason="best rate in the time left"))
+    assert proposer._explored() == explored
 
 
 def test_sas_is_scored_by_its_stints_on_comparable_data_as_its_surrogate_learns_from_every_evaluation(toy_spec):
