@@ -2,7 +2,8 @@
 
     python benchmarks/equal_time.py specs/collab.yaml --minutes 5,15 --seeds 3 \\
         [--algorithms random,map_elites,cma_mae:1,sas,dsas,auto] [--inner-iterations 300] \\
-        [--training incremental] [--inner-stall 50] [--time-share 0.33] [--workers 2] [--device cpu] [--out DIR]
+        [--training incremental] [--inner-stall 50] [--time-share 0.33] [--selection gain] [--workers 2] \\
+        [--device cpu] [--out DIR]
 
 A user has a CI budget or an afternoon, not an evaluation count, so this is the comparison that
 decides what they should run. Each run is one ``hritest search --time-limit`` of the longest mark,
@@ -154,7 +155,8 @@ def main() -> None:
     lines = [
         f"{args.spec.name}: equal wall time, {args.workers} workers, SAS/DSAS inner "
         f"iterations {args.inner_iterations:,}, training {args.training or 'as the spec'}, inner stall "
-        f"{args.inner_stall or 'as the spec'}, time share {args.time_share or 'as the spec'}",
+        f"{args.inner_stall or 'as the spec'}, time share {args.time_share or 'as the spec'}, "
+        f"selection {args.selection or 'as the spec'}",
         "",
         "| " + " | ".join(header) + " |",
         "|" + "---|" * len(header),

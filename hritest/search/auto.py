@@ -38,9 +38,10 @@ workers).
 
 All arms share what is simulated: SAS trains on every evaluation, and the model-free arms share one
 archive, which receives SAS's evaluations too. SAS runs here with the schedule whose cost follows
-its data (incremental training, an inner loop that stops when its archive stalls), and each outer
-iteration's surrogate work is cut to the spec's ``time_share`` of it, from what simulating its
-batch takes (the specs' default, a fifth, where the spec never cuts: the paper's specs).
+its data (incremental training, an inner loop that stops when its archive stalls, and the
+surrogate elites predicted to add the most chosen for simulation), and each outer iteration's
+surrogate work is cut to the spec's ``time_share`` of it, from what simulating its batch takes
+(the specs' default, a fifth, where the spec never cuts: the paper's specs).
 
 Every batch's measurement and the choice behind it go to ``auto.json`` in the run directory (at
 each stint's end), and a summary per arm to ``run.json`` at the end.
@@ -133,7 +134,11 @@ class Auto:
                 gradients=False,
                 seed=seed,
                 options=replace(
-                    options, training="incremental", inner_stall=settings.inner_stall or STALL, time_share=self.share
+                    options,
+                    training="incremental",
+                    inner_stall=settings.inner_stall or STALL,
+                    time_share=self.share,
+                    selection="gain",
                 ),
             ),
         }

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Callable
 
 import numpy as np
 import torch
@@ -153,15 +154,27 @@ def exploit(
     return archive
 
 
-def downsample(domain: Domain, archive: ArchiveBase, *, rng: np.random.Generator) -> np.ndarray:
-    """One uniformly random elite per block of the selection archive, in a random order.
+def downsample(
+    domain: Domain,
+    archive: ArchiveBase,
+    *,
+    rng: np.random.Generator,
+    incumbents: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> np.ndarray:
+    """One elite per block of the selection archive, in a random order.
 
     For a grid, the selection grid has the spec's ``downsample_cells`` per measure (default: the
     archive's own cells, i.e. every elite) and a single cell along each region axis, as in the
     reference. For a cvt archive, the blocks are the cells of a coarser tessellation of the spec's
     measures, ``downsample_cells`` of them (default: every elite is its own block).
+
+    Without ``incumbents``, a uniformly random elite of each block (the reference's). With it (the
+    result archive's objective in the cells of given measures), the elite predicted to gain the
+    QD-score the most: its predicted objective over the incumbent of the cell it predicts. A block
+    spans several cells, some already well filled; a random pick spends simulations there as often
+    as on the cells where a scenario would add (`docs/decisions.md`).
     """
-    data = archive.data(["solution", "measures"])
+    data = archive.data(["solution", "objective", "measures"])
     if len(data["solution"]) == 0:
         return np.zeros((0, domain.space.dim))
     cells = domain.spec.search.surrogate.downsample_cells
@@ -177,7 +190,12 @@ def downsample(domain: Domain, archive: ArchiveBase, *, rng: np.random.Generator
     else:
         grid = GridArchive(solution_dim=1, dims=cells or list(domain.archive_dims), ranges=domain.archive_ranges)
         block = grid.index_of(measures)
-    order = rng.permutation(len(block))
-    _, first = np.unique(block[order], return_index=True)  # a random elite per block
+    if incumbents is None:
+        order = rng.permutation(len(block))
+    else:  # the search archive's objective is normalised by the objective's span (the surrogate's targets)
+        lo, hi = domain.spec.objective.range
+        gain = data["objective"] * (hi - lo) - incumbents(measures)
+        order = np.lexsort((rng.random(len(block)), -gain))  # largest gain first, ties at random
+    _, first = np.unique(block[order], return_index=True)  # the first of each block in that order
     chosen = order[first]
     return data["solution"][rng.permutation(chosen)]

@@ -64,6 +64,8 @@ class _AheadView:
         self.evaluated, self.qd_score = search.evaluated, search.qd_score
         self.seconds_per_evaluation = search.seconds_per_evaluation
         self.data = search.dataset(before=search.evaluated)
+        self.cells = archives.cell_objectives(search.state.result, search.domain.spec.objective.range[0])
+        self.index_of = search.state.result.index_of
 
     @property
     def seconds_left(self) -> float:
@@ -71,6 +73,9 @@ class _AheadView:
 
     def dataset(self) -> tuple[np.ndarray, np.ndarray | GridRows, np.ndarray]:
         return self.data
+
+    def elite_objectives(self, measures: np.ndarray) -> np.ndarray:
+        return self.cells[self.index_of(measures)]
 
     def phase(self, name: str) -> None:
         self.search.ahead_phase = name  # shown beside "simulating" by the next snapshot
@@ -439,6 +444,12 @@ class Search:
         if math.prod(self.occupancy_shape) == 0:
             return theta, np.zeros((len(theta), *self.occupancy_shape), np.float32), targets
         return theta, GridRows(self.run_dir.occupancy(self.occupancy_shape), lines), targets
+
+    def elite_objectives(self, measures: np.ndarray) -> np.ndarray:
+        """The result archive's objective in the cells of ``measures``, the objective range's low
+        end where a cell is empty (what SAS's selection weighs its predictions against)."""
+        result = self.state.result
+        return archives.cell_objectives(result, self.domain.spec.objective.range[0])[result.index_of(measures)]
 
     def snapshot(self, extra: int = 0) -> Snapshot:
         """The last batch's snapshot, with ``extra`` evaluations of the current one finished."""

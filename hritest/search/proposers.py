@@ -54,6 +54,11 @@ class SearchView(Protocol):
         """Training data of every successful evaluation: raw theta, grids, targets."""
         ...
 
+    def elite_objectives(self, measures: np.ndarray) -> np.ndarray:
+        """The result archive's objective in the cells of ``measures`` (the spec's measures), the
+        objective range's low end where a cell is empty."""
+        ...
+
     def phase(self, name: str) -> None:
         """Shows what the proposer is doing (``training``, ``inner loop``) in the progress display."""
         ...
@@ -113,8 +118,9 @@ class SurrogateOptions:
     inner_stall: int | None = None
     pipeline: bool | None = None
     time_share: float | None = None
+    selection: str | None = None
 
-    SETTINGS = ("inner_iterations", "training", "inner_stall", "pipeline", "time_share")  # of search.surrogate
+    SETTINGS = ("inner_iterations", "training", "inner_stall", "pipeline", "time_share", "selection")  # of the spec
 
     def applied_to(self, settings: SurrogateSettings) -> SurrogateSettings:
         """The spec's ``search.surrogate`` with those of these options that were given (not None)."""
@@ -128,7 +134,8 @@ class SurrogateAssisted:
     The first ``initial_evaluations`` proposals are uniform in the bounds. After that, each ask
     is one outer iteration: train the surrogate on the evaluations so far (all of them each time,
     as the paper, or the new ones and as many replayed: ``training``), search it from scratch, and
-    propose one random surrogate elite per block of the selection grid. Each
+    propose one surrogate elite per block of the selection grid (``selection``: the one predicted to
+    add the most to the result archive, or, as the paper, any one). Each
     proposal's prediction is kept, so that once simulated it measures the surrogate's accuracy
     on data it was not trained on (the paper's held-out evaluation).
 
@@ -156,7 +163,7 @@ class SurrogateAssisted:
             seed=seed,
         )
         self.training, self.stall, self.pipeline = settings.training, settings.inner_stall, settings.pipeline
-        self.time_share = settings.time_share
+        self.time_share, self.selection = settings.time_share, settings.selection
         self.trained = 0  # samples the surrogate had seen at its last fit
         self.largest = self.initial  # the largest batch proposed so far: what the time share is of
         self.outer = 0
@@ -204,7 +211,12 @@ class SurrogateAssisted:
             deadline=end,
         )
         searched = time.monotonic()
-        proposals = inner.downsample(search.domain, archive, rng=self.rng)
+        proposals = inner.downsample(
+            search.domain,
+            archive,
+            rng=self.rng,
+            incumbents=search.elite_objectives if self.selection == "gain" else None,
+        )
         if len(proposals) == 0:  # an empty surrogate archive: explore instead of stalling
             proposals = self.rng.uniform(space.lower, space.upper, size=(8, space.dim))
         self.fits.append(
@@ -263,8 +275,9 @@ class SurrogateAssisted:
 
     def __setstate__(self, state: dict) -> None:
         # Checkpoints written before the incremental schedule existed trained the paper's way, and
-        # those from before time_share never cut its work; those from before pipelining kept one
-        # batch's predictions without its proposals (dropped: their held-out errors go unmeasured).
+        # those from before time_share never cut its work, those from before selection chose at
+        # random; those from before pipelining kept one batch's predictions without its proposals
+        # (dropped: their held-out errors go unmeasured).
         state.pop("pending_predictions", None)
         before = {
             "training": "paper",
@@ -273,6 +286,7 @@ class SurrogateAssisted:
             "pipeline": False,
             "predictions": [],
             "time_share": 1.0,
+            "selection": "random",
             "largest": state["initial"],
         }
         self.__dict__.update({**before, **state})

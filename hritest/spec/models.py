@@ -381,8 +381,14 @@ class SurrogateSettings(Strict):
     inner_iterations: PositiveInt = 10_000
     downsample_cells: list[PositiveInt] | None = Field(
         None,
-        description="cells per measure of the selection archive (a cvt archive: one number, its cells); one random "
-        "elite per block is evaluated",
+        description="cells per measure of the selection archive (a cvt archive: one number, its cells); one "
+        "elite per block is evaluated (see selection)",
+    )
+    selection: Literal["gain", "random"] = Field(
+        "gain",
+        description="which surrogate elite of a block is evaluated: gain, the one predicted to add the most to the "
+        "result archive (its predicted objective over the elite already in the cell it predicts, or over the "
+        "objective range's low end where that cell is empty); random, any one (the paper and its bundled specs)",
     )
     epochs: PositiveInt = 100
     batch_size: BatchSize = 64
