@@ -75,13 +75,11 @@ def workspace_objects(domain: Domain) -> tuple[str, ...]:
     return domain.repair.objects if len(domain.repair.region_names) > 1 else ()
 
 
-def cell_objectives(archive: ArchiveBase, empty: float) -> np.ndarray:
-    """Per cell of ``archive``, its elite's objective (``empty`` where it has none): what a new
-    scenario must beat there to add to the QD-score, by cell index (``archive.index_of``)."""
-    objectives = np.full(archive.cells, empty, dtype=float)
-    data = archive.data(["index", "objective"])
-    objectives[data["index"]] = data["objective"]
-    return objectives
+def elite_objectives(archive: ArchiveBase, measures: np.ndarray, *, empty: float) -> np.ndarray:
+    """The objective of ``archive``'s elite in the cell of each row of ``measures`` (``empty``
+    where it has none): what a new scenario there must beat to add to the QD-score."""
+    occupied, data = archive.retrieve(measures)
+    return np.where(occupied, data["objective"], empty)
 
 
 def region_measures(domain: Domain, regions: list[dict[str, str | None]]) -> np.ndarray:

@@ -14,6 +14,7 @@ not wait while it trains and searches its surrogate; that batch is checkpointed 
 
 from __future__ import annotations
 
+import copy
 import ctypes
 import math
 import signal
@@ -64,8 +65,7 @@ class _AheadView:
         self.evaluated, self.qd_score = search.evaluated, search.qd_score
         self.seconds_per_evaluation = search.seconds_per_evaluation
         self.data = search.dataset(before=search.evaluated)
-        self.cells = archives.cell_objectives(search.state.result, search.domain.spec.objective.range[0])
-        self.index_of = search.state.result.index_of
+        self.result = copy.deepcopy(search.state.result)
 
     @property
     def seconds_left(self) -> float:
@@ -75,7 +75,7 @@ class _AheadView:
         return self.data
 
     def elite_objectives(self, measures: np.ndarray) -> np.ndarray:
-        return self.cells[self.index_of(measures)]
+        return archives.elite_objectives(self.result, measures, empty=self.domain.spec.objective.range[0])
 
     def phase(self, name: str) -> None:
         self.search.ahead_phase = name  # shown beside "simulating" by the next snapshot
@@ -448,8 +448,7 @@ class Search:
     def elite_objectives(self, measures: np.ndarray) -> np.ndarray:
         """The result archive's objective in the cells of ``measures``, the objective range's low
         end where a cell is empty (what SAS's selection weighs its predictions against)."""
-        result = self.state.result
-        return archives.cell_objectives(result, self.domain.spec.objective.range[0])[result.index_of(measures)]
+        return archives.elite_objectives(self.state.result, measures, empty=self.domain.spec.objective.range[0])
 
     def snapshot(self, extra: int = 0) -> Snapshot:
         """The last batch's snapshot, with ``extra`` evaluations of the current one finished."""

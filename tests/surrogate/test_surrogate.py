@@ -178,7 +178,7 @@ def test_selection_by_gain_takes_the_surrogate_elite_that_would_add_the_most_to_
         return downsample(domain, surrogate, rng=np.random.default_rng(seed), incumbents=incumbents)[0, 0]
 
     def incumbents(measures):
-        return archives.cell_objectives(result, 0.0)[result.index_of(measures)]
+        return archives.elite_objectives(result, measures, empty=0.0)
 
     # Over an empty result archive, the higher prediction gains the most (9 against 5)...
     assert {pick(seed, incumbents=incumbents) for seed in range(8)} == {1.0}
