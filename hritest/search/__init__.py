@@ -16,6 +16,7 @@ from pathlib import Path
 from hritest.domain import compile_spec, load_domain
 from hritest.errors import HritestError
 from hritest.rundir import RunDirectory, RunDirectoryError, digest
+from hritest.search.auto import sas_options
 from hritest.search.executor import DomainRef, Evaluator, local_pool
 from hritest.search.loop import ALGORITHMS, SURROGATE, Search, Snapshot
 from hritest.search.proposers import SurrogateOptions
@@ -101,7 +102,10 @@ def start(
         )
     ref = DomainRef(spec=str(Path(spec_file).resolve()), base=str(Path(spec_file).resolve().parent))
     meta = {"algorithm": algorithm, "budget": budget, "time_limit": time_limit, "seed": seed, "spec_base": ref.base}
-    chosen = surrogate.applied_to(settings.surrogate)
+    # auto's SAS arm runs with a schedule of its own (auto.sas_options): record that one
+    chosen = (sas_options(surrogate, settings.surrogate) if algorithm == "auto" else surrogate).applied_to(
+        settings.surrogate
+    )
     if algorithm in (*SURROGATE, "auto"):  # what decides a surrogate's cost and quality besides the budget
         meta |= chosen.model_dump(include={"inner_iterations", "training", "inner_stall", "selection"})
     if algorithm in SURROGATE:  # auto's SAS arm is never pipelined and has its time set by auto

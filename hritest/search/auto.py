@@ -91,6 +91,22 @@ FILE = "auto.json"
 BEST = "best rate"  # the reason for a stint of the arm with the best score
 
 
+def sas_options(options: SurrogateOptions, spec: SurrogateSettings) -> SurrogateOptions:
+    """What auto's SAS arm runs with, whatever the spec's ``search.surrogate`` and ``options`` say
+    of the schedule: incremental training, an inner loop that stops when it stalls (the spec's
+    stall, or the default), the selection by predicted gain, and the surrogate's work always cut
+    (a spec that never cuts it, as the paper's, gets the default share, or its SAS would take most
+    of a slow domain's stints). ``run.json`` records these, not the spec's."""
+    settings = options.applied_to(spec)
+    return replace(
+        options,
+        training="incremental",
+        inner_stall=settings.inner_stall or STALL,
+        time_share=settings.time_share if settings.time_share < 1 else SHARE,
+        selection="gain",
+    )
+
+
 @dataclass(frozen=True, kw_only=True)
 class Batch:
     """One batch's measurement: what proposed it, in which stint, why, and what it cost and gained."""
@@ -121,10 +137,8 @@ class Auto:
     def __init__(self, domain: Domain, *, seed: int, options: SurrogateOptions) -> None:
         shared = archives.search_archive(domain, seed=seed)
         self.seed, self.shared = seed, shared
-        settings = options.applied_to(domain.spec.search.surrogate)
-        # auto always cuts the surrogate's work: a spec that never does (time_share 1, as the
-        # paper's) gets the default share, or its SAS would take most of a slow domain's stints.
-        self.share = settings.time_share if settings.time_share < 1 else SHARE
+        sas = sas_options(options, domain.spec.search.surrogate)
+        self.share = sas.time_share
         self.arms = {
             "random": ModelFree(algorithms.scheduler(domain, "random", shared, seed=seed)),
             "map_elites": ModelFree(algorithms.scheduler(domain, "map_elites", shared, seed=seed)),
@@ -133,13 +147,7 @@ class Auto:
                 domain,
                 gradients=False,
                 seed=seed,
-                options=replace(
-                    options,
-                    training="incremental",
-                    inner_stall=settings.inner_stall or STALL,
-                    time_share=self.share,
-                    selection="gain",
-                ),
+                options=sas,
             ),
         }
         self.initial = domain.spec.search.surrogate.initial_evaluations

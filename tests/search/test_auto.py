@@ -33,7 +33,9 @@ def test_auto_measures_each_arm_then_spends_each_stint_on_the_best_rate(toy_spec
         "time_limit: 10.0\n",
         "time_limit: 10.0\n  params: {delay: 0.002}\n",
     )
-    spec.write_text(spec.read_text() + "  emitter: {emitters: 4, batch_size: 25}\n")
+    # The paper's schedule in the spec, which auto's SAS arm does not take (auto.sas_options).
+    extra = "  emitter: {emitters: 4, batch_size: 25}\n  surrogate: {training: paper, selection: random}\n"
+    spec.write_text(spec.read_text() + extra)
     run = tmp_path / "run"
     found = qd.start(
         spec_file=spec,
@@ -83,6 +85,10 @@ def test_auto_measures_each_arm_then_spends_each_stint_on_the_best_rate(toy_spec
     meta = json.loads((run / "run.json").read_text())
     assert meta["algorithm"] == "auto" and set(meta["auto"]["arms"]) == set(ARMS)
     assert sum(a["evaluations"] for a in meta["auto"]["arms"].values()) == 4000
+    # with the schedule its SAS arm ran, not the spec's
+    assert (meta["training"], meta["selection"], meta["inner_stall"]) == ("incremental", "gain", auto.STALL)
+    sas = found.state.proposer.arms["sas"]
+    assert (sas.training, sas.selection, sas.stall) == (meta["training"], meta["selection"], meta["inner_stall"])
     with open(run / "progress.csv", newline="") as handle:
         proposers = [row["proposer"] for row in csv.DictReader(handle)]
     assert proposers == [b["arm"] for b in batches]
