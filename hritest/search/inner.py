@@ -10,7 +10,6 @@ evaluates.
 
 from __future__ import annotations
 
-import math
 import time
 import warnings
 from collections.abc import Callable
@@ -155,43 +154,12 @@ def exploit(
     return archive
 
 
-class SimulationCost:
-    """What simulating a scenario costs, as a line in its objective fitted to the scenarios
-    simulated so far (running sums: flat in memory), clipped to the fastest and slowest seen.
-
-    Where the objective is a completion time, the simulation runs as long as the episode: on
-    collaboration I the seconds follow the objective (correlation 0.6 to 0.8, no intercept), and a
-    pick by gain alone simulates the slowest scenarios. Without two distinct objectives, a constant.
-    """
-
-    def __init__(self) -> None:
-        self.sums = np.zeros(5)  # count, objective, seconds, objective², objective x seconds
-        self.fastest, self.slowest = math.inf, 0.0
-
-    def add(self, objectives: np.ndarray, seconds: np.ndarray) -> None:
-        x, y = np.asarray(objectives, dtype=float), np.asarray(seconds, dtype=float)
-        if len(x):
-            self.sums += [len(x), x.sum(), y.sum(), x @ x, x @ y]
-            self.fastest, self.slowest = min(self.fastest, y.min()), max(self.slowest, y.max())
-
-    def __call__(self, objectives: np.ndarray) -> np.ndarray:
-        """Predicted seconds of scenarios with these objectives (ones before any is simulated)."""
-        n, sx, sy, sxx, sxy = self.sums
-        if n == 0:
-            return np.ones(len(objectives))
-        spread = n * sxx - sx * sx
-        slope = (n * sxy - sx * sy) / spread if spread > 1e-12 * max(n * sxx, 1.0) else 0.0
-        line = (sy - slope * sx) / n + slope * np.asarray(objectives, dtype=float)
-        return np.clip(line, max(self.fastest, 1e-6), max(self.slowest, 1e-6))
-
-
 def downsample(
     domain: Domain,
     archive: ArchiveBase,
     *,
     rng: np.random.Generator,
     incumbents: Callable[[np.ndarray], np.ndarray] | None = None,
-    cost: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> np.ndarray:
     """One elite per block of the selection archive, in a random order.
 
@@ -204,8 +172,7 @@ def downsample(
     result archive's objective in the cells of given measures), the elite predicted to gain the
     QD-score the most: its predicted objective over the incumbent of the cell it predicts. A block
     spans several cells, some already well filled; a random pick spends simulations there as often
-    as on the cells where a scenario would add (`docs/decisions.md`). With ``cost`` too (predicted
-    seconds of a scenario from its predicted objective), the most gain per second of simulation.
+    as on the cells where a scenario would add (`docs/decisions.md`).
     """
     data = archive.data(["solution", "objective", "measures"])
     if len(data["solution"]) == 0:
@@ -227,10 +194,7 @@ def downsample(
         order = rng.permutation(len(block))
     else:  # the search archive's objective is normalised by the objective's span (the surrogate's targets)
         lo, hi = domain.spec.objective.range
-        predicted = data["objective"] * (hi - lo)
-        gain = predicted - incumbents(measures)
-        if cost is not None:
-            gain = gain / cost(predicted)
+        gain = data["objective"] * (hi - lo) - incumbents(measures)
         order = np.lexsort((rng.random(len(block)), -gain))  # largest gain first, ties at random
     _, first = np.unique(block[order], return_index=True)  # the first of each block in that order
     chosen = order[first]

@@ -164,7 +164,6 @@ class SurrogateAssisted:
         )
         self.training, self.stall, self.pipeline = settings.training, settings.inner_stall, settings.pipeline
         self.time_share, self.selection = settings.time_share, settings.selection
-        self.cost = inner.SimulationCost()  # of the scenarios it was told of: for the selection by rate
         self.trained = 0  # samples the surrogate had seen at its last fit
         self.largest = self.initial  # the largest batch proposed so far: what the time share is of
         self.outer = 0
@@ -216,8 +215,7 @@ class SurrogateAssisted:
             search.domain,
             archive,
             rng=self.rng,
-            incumbents=None if self.selection == "random" else search.elite_objectives,
-            cost=self.cost if self.selection == "rate" else None,
+            incumbents=search.elite_objectives if self.selection == "gain" else None,
         )
         if len(proposals) == 0:  # an empty surrogate archive: explore instead of stalling
             proposals = self.rng.uniform(space.lower, space.upper, size=(8, space.dim))
@@ -278,9 +276,8 @@ class SurrogateAssisted:
     def __setstate__(self, state: dict) -> None:
         # Checkpoints written before the incremental schedule existed trained the paper's way, and
         # those from before time_share never cut its work, those from before selection chose at
-        # random (those from before the selection by rate start its cost line afresh); those from
-        # before pipelining kept one batch's predictions without its proposals (dropped: their
-        # held-out errors go unmeasured).
+        # random; those from before pipelining kept one batch's predictions without its proposals
+        # (dropped: their held-out errors go unmeasured).
         state.pop("pending_predictions", None)
         before = {
             "training": "paper",
@@ -290,14 +287,11 @@ class SurrogateAssisted:
             "predictions": [],
             "time_share": 1.0,
             "selection": "random",
-            "cost": inner.SimulationCost(),
             "largest": state["initial"],
         }
         self.__dict__.update({**before, **state})
 
     def tell(self, search: SearchView, records: list[EvaluationRecord], solutions: np.ndarray) -> None:
-        simulated = [r for r in records if r.ok]
-        self.cost.add(np.array([r.search_objective for r in simulated]), np.array([r.seconds for r in simulated]))
         asked = [i for i, (_, proposals, _) in enumerate(self.predictions) if np.array_equal(proposals, solutions)]
         if not asked:  # a uniform batch
             return

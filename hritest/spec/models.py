@@ -384,13 +384,11 @@ class SurrogateSettings(Strict):
         description="cells per measure of the selection archive (a cvt archive: one number, its cells); one "
         "elite per block is evaluated (see selection)",
     )
-    selection: Literal["gain", "rate", "random"] = Field(
+    selection: Literal["gain", "random"] = Field(
         "gain",
         description="which surrogate elite of a block is evaluated: gain, the one predicted to add the most to the "
         "result archive (its predicted objective over the elite already in the cell it predicts, or over the "
-        "objective range's low end where that cell is empty); rate, the most of that gain per second of "
-        "simulation (the seconds as a line in the objective, fitted to the scenarios simulated so far: for "
-        "objectives that are completion times); random, any one (the paper and its bundled specs)",
+        "objective range's low end where that cell is empty); random, any one (the paper and its bundled specs)",
     )
     epochs: PositiveInt = 100
     batch_size: BatchSize = 64

@@ -86,7 +86,7 @@ def test_auto_measures_each_arm_then_spends_each_stint_on_the_best_rate(toy_spec
     assert meta["algorithm"] == "auto" and set(meta["auto"]["arms"]) == set(ARMS)
     assert sum(a["evaluations"] for a in meta["auto"]["arms"].values()) == 4000
     # with the schedule its SAS arm ran, not the spec's
-    assert (meta["training"], meta["selection"], meta["inner_stall"]) == ("incremental", "rate", auto.STALL)
+    assert (meta["training"], meta["selection"], meta["inner_stall"]) == ("incremental", "gain", auto.STALL)
     sas = found.state.proposer.arms["sas"]
     assert (sas.training, sas.selection, sas.stall) == (meta["training"], meta["selection"], meta["inner_stall"])
     with open(run / "progress.csv", newline="") as handle:

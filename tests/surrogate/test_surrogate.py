@@ -17,7 +17,7 @@ from hritest.domain import compile_spec
 from hritest.evaluate import evaluate
 from hritest.rundir import RunDirectory
 from hritest.search import archives
-from hritest.search.inner import SimulationCost, SurrogateObjective, downsample, exploit
+from hritest.search.inner import SurrogateObjective, downsample, exploit
 from hritest.search.state import load_state
 from hritest.spec import load_spec
 from hritest.surrogate.model import Surrogate
@@ -187,39 +187,6 @@ def test_selection_by_gain_takes_the_surrogate_elite_that_would_add_the_most_to_
     assert {pick(seed, incumbents=incumbents) for seed in range(8)} == {2.0}
     # The paper's selection takes either.
     assert {pick(seed, incumbents=None) for seed in range(8)} == {1.0, 2.0}
-
-
-def test_selection_by_rate_takes_the_most_gain_per_predicted_second_of_simulation():
-    domain = compile_spec(load_spec(SPECS / "teleop.yaml"))
-    filled, empty = [0.01, 0.001], [0.05, 0.004]  # two cells of one block, as above
-    surrogate = archives.search_archive(domain, seed=0)
-    solutions = np.array([np.full(domain.space.dim, 1.0), np.full(domain.space.dim, 2.0)])
-    surrogate.add(solutions, np.array([0.9, 0.5]), np.array([filled, empty]))
-    result = archives.result_archive(domain, seed=0)
-    result.add(np.zeros((1, domain.space.dim)), np.array([3.0]), np.array([filled]), evaluation=np.array([0]))
-    cost = SimulationCost()
-    cost.add(np.array([2.0, 4.0, 8.0]), np.array([0.2, 0.4, 0.8]))  # seconds follow the objective
-
-    def pick(seed, **selection):
-        return downsample(domain, surrogate, rng=np.random.default_rng(seed), **selection)[0, 0]
-
-    def incumbents(measures):
-        return archives.elite_objectives(result, measures, empty=0.0)
-
-    # 9 over 3 gains the most (6 against 5), but in 0.8 s against 0.5 s: 7.5 a second against 10.
-    assert {pick(seed, incumbents=incumbents) for seed in range(8)} == {1.0}
-    assert {pick(seed, incumbents=incumbents, cost=cost) for seed in range(8)} == {2.0}
-
-
-def test_the_simulation_cost_is_a_line_in_the_objective_within_the_seconds_seen():
-    cost = SimulationCost()
-    assert cost(np.array([1.0, 50.0])).tolist() == [1.0, 1.0]  # nothing simulated: all alike
-    cost.add(np.array([2.0, 2.0]), np.array([0.3, 0.5]))
-    assert cost(np.array([1.0, 50.0])) == pytest.approx([0.4, 0.4])  # one objective: their mean
-    cost.add(np.array([6.0, 6.0]), np.array([0.7, 0.9]))  # 0.2 + 0.1 x objective
-    assert cost(np.array([0.0, 4.0, 100.0])) == pytest.approx([0.3, 0.6, 0.9])  # clipped to 0.3-0.9 s
-    cost.add(np.array([]), np.array([]))  # a batch with nothing simulated changes nothing
-    assert cost(np.array([4.0])) == pytest.approx([0.6])
 
 
 def objective_measures(domain, model, solutions):
