@@ -107,7 +107,7 @@ def start(
         settings.surrogate
     )
     if algorithm in (*SURROGATE, "auto"):  # what decides a surrogate's cost and quality besides the budget
-        meta |= chosen.model_dump(include={"inner_iterations", "training", "inner_stall", "selection"})
+        meta |= chosen.model_dump(include={"inner_iterations", "training", "inner_stall", "selection", "screen"})
     if algorithm in SURROGATE:  # auto's SAS arm is never pipelined and has its time set by auto
         meta |= chosen.model_dump(include={"pipeline", "time_share"})
     evaluator = backend.evaluator(ref)  # before the folder exists: a bad backend leaves nothing behind

@@ -94,7 +94,7 @@ BEST = "best rate"  # the reason for a stint of the arm with the best score
 def sas_options(options: SurrogateOptions, spec: SurrogateSettings) -> SurrogateOptions:
     """What auto's SAS arm runs with, whatever the spec's ``search.surrogate`` and ``options`` say
     of the schedule: incremental training, an inner loop that stops when it stalls (the spec's
-    stall, or the default), the selection by predicted gain, and the surrogate's work always cut
+    stall, or the default), the selection by predicted gain, screened, and the surrogate's work always cut
     (a spec that never cuts it, as the paper's, gets the default share, or its SAS would take most
     of a slow domain's stints). ``run.json`` records these, not the spec's."""
     settings = options.applied_to(spec)
@@ -104,6 +104,7 @@ def sas_options(options: SurrogateOptions, spec: SurrogateSettings) -> Surrogate
         inner_stall=settings.inner_stall or STALL,
         time_share=settings.time_share if settings.time_share < 1 else SHARE,
         selection="gain",
+        screen=True,
     )
 
 

@@ -171,6 +171,7 @@ class Search:
         self.deadline: float | None = None
         self.cut: ProgressRow | None = None  # where a batch the deadline cut short got to
         self.ahead_phase = ""  # what an ask ahead of the batch in flight is doing
+        self.added: dict[int, float] = {}  # what each evaluation of the last batch added to the QD-score
         self.progress: Callable[[Snapshot], None] = lambda s: None
 
     def _note(self, record: EvaluationRecord) -> None:
@@ -421,15 +422,29 @@ class Search:
         self.progress(self.snapshot())
 
     def _add_to_result(self, records: list[EvaluationRecord]) -> None:
-        """Adds the successful evaluations to the result archive with their raw objective."""
+        """Adds the successful evaluations to the result archive with their raw objective, and
+        keeps what each added to its QD-score, for :meth:`gains`."""
         good = [r for r in records if r.ok]
+        self.added = {}
         if good:
-            self.state.result.add(
+            added = self.state.result.add(
                 np.array([r.theta_repaired for r in good]),
                 np.array([r.objective for r in good]),
                 np.array([r.measures for r in good]),
                 evaluation=np.array([r.index for r in good]),
             )
+            # ribs' value: the improvement on the elite replaced, or the objective where a cell was
+            # new (over 0, where the QD-score counts it over the objective range's low end)
+            lo = self.domain.spec.objective.range[0]
+            gain = np.select([added["status"] == 2, added["status"] == 1], [added["value"] - lo, added["value"]], 0.0)
+            self.added = {r.index: float(g) for r, g in zip(good, gain, strict=True)}
+
+    def gains(self, records: list[EvaluationRecord]) -> np.ndarray:
+        """What each of ``records``, of the batch being told, added to the result archive's
+        QD-score: its objective over the elite it replaced, or over the objective range's low end
+        in a cell it filled; 0 where it added nothing or did not complete. (Two that fill the same
+        cell in one batch both count.)"""
+        return np.array([self.added.get(r.index, 0.0) for r in records], dtype=float)
 
     def dataset(self, before: int | None = None) -> tuple[np.ndarray, np.ndarray | GridRows, np.ndarray]:
         """Training data from every successful evaluation (with ``before``, of those of a lower

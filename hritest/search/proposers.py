@@ -19,7 +19,7 @@ import numpy as np
 from hritest.domain import Domain
 from hritest.records import EvaluationRecord
 from hritest.rundir import RunDirectory
-from hritest.search import archives, inner
+from hritest.search import archives, inner, screening
 from hritest.spec.models import SurrogateSettings
 
 
@@ -57,6 +57,11 @@ class SearchView(Protocol):
     def elite_objectives(self, measures: np.ndarray) -> np.ndarray:
         """The result archive's objective in the cells of ``measures`` (the spec's measures), the
         objective range's low end where a cell is empty."""
+        ...
+
+    def gains(self, records: list[EvaluationRecord]) -> np.ndarray:
+        """What each of ``records``, of the batch being told, added to the result archive's
+        QD-score (0 where it added nothing or did not complete)."""
         ...
 
     def phase(self, name: str) -> None:
@@ -119,8 +124,10 @@ class SurrogateOptions:
     pipeline: bool | None = None
     time_share: float | None = None
     selection: str | None = None
+    screen: bool | None = None
 
-    SETTINGS = ("inner_iterations", "training", "inner_stall", "pipeline", "time_share", "selection")  # of the spec
+    # of the spec
+    SETTINGS = ("inner_iterations", "training", "inner_stall", "pipeline", "time_share", "selection", "screen")
 
     def applied_to(self, settings: SurrogateSettings) -> SurrogateSettings:
         """The spec's ``search.surrogate`` with those of these options that were given (not None)."""
@@ -135,7 +142,8 @@ class SurrogateAssisted:
     is one outer iteration: train the surrogate on the evaluations so far (all of them each time,
     as the paper, or the new ones and as many replayed: ``training``), search it from scratch, and
     propose one surrogate elite per block of the selection grid (``selection``: the one predicted to
-    add the most to the result archive, or, as the paper, any one). Each
+    add the most to the result archive, or, as the paper, any one), of which, with ``screen``, those
+    whose predicted objective paid for its simulation in the last rounds (:mod:`screening`). Each
     proposal's prediction is kept, so that once simulated it measures the surrogate's accuracy
     on data it was not trained on (the paper's held-out evaluation).
 
@@ -164,6 +172,10 @@ class SurrogateAssisted:
         )
         self.training, self.stall, self.pipeline = settings.training, settings.inner_stall, settings.pipeline
         self.time_share, self.selection = settings.time_share, settings.selection
+        self.screen = settings.screen and not settings.pipeline  # a pipelined round's work costs no wall time
+        # Per batch told (the last screening.ROUNDS), the simulated proposals' predicted objective, the
+        # QD-score each added and its seconds: what screening judges the next proposals by.
+        self.outcomes: list[np.ndarray] = []
         self.trained = 0  # samples the surrogate had seen at its last fit
         self.largest = self.initial  # the largest batch proposed so far: what the time share is of
         self.outer = 0
@@ -183,7 +195,8 @@ class SurrogateAssisted:
         if done < self.initial:
             return self.rng.uniform(space.lower, space.upper, size=(self.initial - done, space.dim))
         started = time.monotonic()
-        seconds = self._seconds(search.seconds_per_evaluation if per_evaluation is None else per_evaluation)
+        per_evaluation = search.seconds_per_evaluation if per_evaluation is None else per_evaluation
+        seconds = self._seconds(per_evaluation)
         # Training and inner loop end by the run's time limit too: whatever they found is proposed.
         budget = min(math.inf if seconds is None else seconds, search.seconds_left)
         end = None if math.isinf(budget) else started + budget
@@ -219,6 +232,11 @@ class SurrogateAssisted:
         )
         if len(proposals) == 0:  # an empty surrogate archive: explore instead of stalling
             proposals = self.rng.uniform(space.lower, space.upper, size=(8, space.dim))
+        predictions = self.surrogate.predict(proposals)
+        chosen = len(proposals)
+        if self.screen:
+            keep = self._worth(predictions[:, 0], overhead=searched - started, per_evaluation=per_evaluation)
+            proposals, predictions = proposals[keep], predictions[keep]
         self.fits.append(
             {
                 "outer_iteration": self.outer,
@@ -230,11 +248,26 @@ class SurrogateAssisted:
                 "inner_iterations": objective.calls,
                 "inner_loop_seconds": round(searched - trained, 3),
                 "proposed": len(proposals),
+                "screened_out": chosen - len(proposals),
             }
         )
-        self.predictions.append((self.outer, proposals, self.surrogate.predict(proposals)))
+        self.predictions.append((self.outer, proposals, predictions))
         self.largest = max(self.largest, len(proposals))
         return proposals
+
+    def _worth(self, predicted: np.ndarray, *, overhead: float, per_evaluation: float | None) -> np.ndarray:
+        """Which proposals of ``predicted`` (normalised) objective to simulate (:mod:`screening`).
+        The round's ``overhead`` seconds of surrogate work are wall seconds, the outcomes' of
+        single simulations: the workers' parallelism converts them, measured as the seconds of
+        simulation in the last batch told per wall second that a scenario took
+        (``per_evaluation``). Always at least one proposal, the highest predicted."""
+        outcomes = np.concatenate(self.outcomes) if self.outcomes else np.zeros((0, 3))
+        if per_evaluation is None or per_evaluation <= 0 or not len(outcomes):
+            return np.ones(len(predicted), bool)
+        parallel = max(float(np.mean(self.outcomes[-1][:, 2])) / per_evaluation, 1.0)
+        keep = screening.worth_simulating(predicted, outcomes=outcomes, overhead=overhead * parallel)
+        keep[np.argmax(predicted)] = True
+        return keep
 
     def _seconds(self, per_evaluation: float | None) -> float | None:
         """What an outer iteration's surrogate work may take to keep to ``time_share`` of the run:
@@ -277,7 +310,8 @@ class SurrogateAssisted:
         # Checkpoints written before the incremental schedule existed trained the paper's way, and
         # those from before time_share never cut its work, those from before selection chose at
         # random; those from before pipelining kept one batch's predictions without its proposals
-        # (dropped: their held-out errors go unmeasured).
+        # (dropped: their held-out errors go unmeasured); those from before screening simulated every
+        # proposal.
         state.pop("pending_predictions", None)
         before = {
             "training": "paper",
@@ -288,6 +322,8 @@ class SurrogateAssisted:
             "time_share": 1.0,
             "selection": "random",
             "largest": state["initial"],
+            "screen": False,
+            "outcomes": [],
         }
         self.__dict__.update({**before, **state})
 
@@ -297,6 +333,8 @@ class SurrogateAssisted:
             return
         outer, _, predictions = self.predictions[asked[0]]
         del self.predictions[: asked[0] + 1]
+        outcome = np.column_stack([predictions[: len(records), 0], search.gains(records), [r.seconds for r in records]])
+        self.outcomes = [*self.outcomes[1 - screening.ROUNDS :], outcome]
         lo, hi = search.domain.spec.objective.range
         for record, predicted in zip(records, predictions):
             if record.ok:

@@ -390,6 +390,13 @@ class SurrogateSettings(Strict):
         "result archive (its predicted objective over the elite already in the cell it predicts, or over the "
         "objective range's low end where that cell is empty); random, any one (the paper and its bundled specs)",
     )
+    screen: bool = Field(
+        True,
+        description="simulate, of the proposals selected, those whose predicted objective gained, in the last "
+        "rounds, more QD-score per second of simulation than the round as a whole, its surrogate work counted "
+        "(proposals predicted low add nothing to an archive of high elites); false: simulate every one, as the "
+        "paper and its bundled specs. Not with pipeline, whose surrogate work costs no wall time",
+    )
     epochs: PositiveInt = 100
     batch_size: BatchSize = 64
     learning_rate: PositiveFloat = 1e-4
