@@ -48,7 +48,14 @@ def same_run(run: Path, *, algorithm: str, evals: int, seed: int, surrogate: dic
     wanted = {"algorithm": algorithm, "budget": evals, "seed": seed, "spec_digest": digest(spec)}
     if algorithm in SURROGATE:
         wanted |= surrogate
-    before = {"training": "paper", "inner_stall": None, "pipeline": False, "time_share": 1.0, "selection": "random"}
+    before = {
+        "training": "paper",
+        "inner_stall": None,
+        "pipeline": False,
+        "time_share": 1.0,
+        "selection": "random",
+        "screen": False,
+    }
     # (runs made before those settings existed)
     meta = before | meta
     return all(meta.get(k) == v for k, v in wanted.items())
@@ -85,6 +92,9 @@ def add_surrogate_arguments(parser: argparse.ArgumentParser, *, inner_iterations
     parser.add_argument(
         "--selection", choices=["gain", "random"], default=None, help="SAS and DSAS; default: the spec's"
     )
+    parser.add_argument(
+        "--screen", action=argparse.BooleanOptionalAction, default=None, help="SAS and DSAS; default: the spec's"
+    )
     parser.add_argument("--device", default=device)
 
 
@@ -97,6 +107,7 @@ def surrogate_options(args: argparse.Namespace) -> qd.SurrogateOptions:
         pipeline=args.pipeline,
         time_share=args.time_share,
         selection=args.selection,
+        screen=args.screen,
     )
 
 
@@ -154,8 +165,7 @@ def main() -> None:
         f"{args.spec.name}: {args.evals} evaluations, {args.seeds} seeds, inner iterations "
         f"{settings.inner_iterations:,} (SAS, DSAS), training {settings.training}, inner stall "
         f"{settings.inner_stall or 'none'}, pipeline {settings.pipeline}, time share {settings.time_share}, "
-        f"selection {settings.selection}, "
-        f"{args.workers} workers",
+        f"selection {settings.selection}, screen {settings.screen}, {args.workers} workers",
         "",
         "| algorithm | QD-score | normalised QD-score | coverage | best | wall s | evaluations / s "
         "| QD-score / Random |",

@@ -1,6 +1,10 @@
+import json
+
 import numpy as np
 
-from hritest.search import screening
+from hritest import search as qd
+from hritest.rundir import RunDirectory
+from hritest.search import archives, screening
 
 
 def outcomes(rates: list[float], *, per_bin: int = 40, seconds: float = 1.0) -> np.ndarray:
@@ -39,3 +43,42 @@ def test_everything_is_simulated_until_there_is_enough_to_judge_by_or_anything_g
     predicted = np.array([0.1, 0.5])
     assert screening.worth_simulating(predicted, outcomes=few, overhead=0.0).all()
     assert screening.worth_simulating(predicted, outcomes=nothing, overhead=0.0).all()
+
+
+def test_a_screening_sas_simulates_what_it_kept_and_measures_what_each_scenario_added(toy_spec, tmp_path):
+    """The rounds' outcomes are the QD-score each simulated proposal added (replayed here one by
+    one), and the rounds that screened proposals out simulated the rest. Scenarios of the toy
+    domain that take 50 ms, against a small surrogate's work: worth screening."""
+    spec = toy_spec("time_limit: 10.0\n", "time_limit: 10.0\n  params: {delay: 0.05}\n")
+    surrogate = "{initial_evaluations: 40, inner_iterations: 20, epochs: 3, downsample_cells: [8, 8], time_share: 1}"
+    spec.write_text(spec.read_text() + f"  surrogate: {surrogate}\n")
+    found = qd.start(
+        spec_file=spec,
+        out=tmp_path / "run",
+        algorithm="sas",
+        budget=600,
+        seed=0,
+        backend=qd.Backend(workers=2, timeout=20),
+        surrogate=qd.SurrogateOptions(device="cpu"),
+    )
+    sas = found.state.proposer
+    assert sas.screen and json.loads((tmp_path / "run" / "run.json").read_text())["screen"] is True
+    # Replayed in order into a fresh result archive, each scenario of the last told batch added
+    # what the run measured (where no other scenario of its batch shares its cell).
+    records = sorted(RunDirectory.open(tmp_path / "run").evaluations(), key=lambda r: r.index)
+    archive = archives.result_archive(found.domain, seed=0)
+    added = {}
+    for r in records:
+        if r.ok:
+            before = archive.stats.qd_score
+            archive.add([r.theta_repaired], [r.objective], [r.measures], evaluation=[r.index])
+            added[r.index] = archive.stats.qd_score - before
+    last = records[found.state.evaluations - len(sas.outcomes[-1]) : found.state.evaluations]
+    cells = archive.index_of(np.array([r.measures for r in last]))
+    alone = [i for i, c in enumerate(cells) if (cells == c).sum() == 1 and last[i].ok]
+    assert alone and np.allclose(sas.outcomes[-1][alone, 1], [added[last[i].index] for i in alone])
+    assert np.allclose(sas.outcomes[-1][:, 2], [r.seconds for r in last], atol=1e-6)  # stored to the microsecond
+    # Something was screened out once there were outcomes to judge by, and what was kept was simulated.
+    assert sum(fit["screened_out"] for fit in sas.fits) > 0
+    sizes = np.diff([0] + [row.evaluations for row in found.state.progress])
+    assert sizes[0] == 40 and sizes[1:-1].tolist() == [fit["proposed"] for fit in sas.fits][: len(sizes) - 2]
