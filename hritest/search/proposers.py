@@ -258,9 +258,11 @@ class SurrogateAssisted:
     def _worth(self, predicted: np.ndarray, *, overhead: float, per_evaluation: float | None) -> np.ndarray:
         """Which proposals of ``predicted`` (normalised) objective to simulate (:mod:`screening`).
         The round's ``overhead`` seconds of surrogate work are wall seconds, the outcomes' of
-        single simulations: the workers' parallelism converts them, measured as the seconds of
-        simulation in the last batch told per wall second that a scenario took
-        (``per_evaluation``). Always at least one proposal, the highest predicted."""
+        single simulations: the workers' parallelism converts them, taken as the mean seconds of
+        a simulation in SAS's last batch over the wall seconds a scenario took (``per_evaluation``:
+        SAS's last batch's, or, under auto, the model-free arms' recent ones, whose shorter
+        scenarios overstate the parallelism and so the overhead: an error toward simulating).
+        Always at least one proposal, the highest predicted."""
         outcomes = np.concatenate(self.outcomes) if self.outcomes else np.zeros((0, 3))
         if per_evaluation is None or per_evaluation <= 0 or not len(outcomes):
             return np.ones(len(predicted), bool)
