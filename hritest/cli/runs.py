@@ -55,7 +55,8 @@ def search(
         typer.Option(
             parser=duration,
             metavar="DURATION",
-            help="stop the search after this long (90, 90s, 15m, 2h), or at --budget if that comes first; "
+            help="stop the search after this long (90, 90s, 15m, 2h; counted from the start, the workers' "
+            "start-up included, and the report comes after it), or at --budget if that comes first; "
             "with --resume: run this much longer (default: the run's own limit again)",
             rich_help_panel="Search",
             show_default=False,
@@ -308,7 +309,7 @@ def _print_summary(found) -> None:  # noqa: ANN001 - hritest.search.Search
     rows = [
         ("run directory", str(found.run_dir.path)),
         ("evaluations", f"{state.evaluations} ({', '.join(f'{n} {k}' for k, n in sorted(statuses.items()))})"),
-        ("wall time", f"{state.elapsed:.1f} s" + (", stopped at its time limit" if not found.done else "")),
+        ("wall time", f"{state.elapsed:.1f} s searching" + (", stopped at its time limit" if not found.done else "")),
         ("QD-score", f"{summary.qd_score:,.2f} (normalised {summary.normalized_qd_score:.4f})"),
         ("coverage", f"{summary.coverage:.2%} of {state.result.cells} cells"),
         ("best objective", f"{summary.best:.4g}"),
